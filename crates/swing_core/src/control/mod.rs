@@ -1,0 +1,2 @@
+//! Swing-damping and flight control: PX4 cascade, LQR and MPC.
+

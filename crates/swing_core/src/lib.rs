@@ -1,0 +1,17 @@
+//! swing_core — the numerical core of swingrt.
+//!
+//! A multirotor carrying an unknown suspended payload: its simulation under PX4's cascaded
+//! controller ([`plant`], [`sim`], [`control::px4`]), data-driven identification of a linear
+//! model ([`sysid`]) and swing-damping control on that model ([`control`]). Pure Rust, `f64`,
+//! no Python; the PyO3 binding lives in the `swing_py` crate. Equation numbers refer to the
+//! thesis in `shared/seed/thesis.txt`.
+
+pub mod config;
+pub mod control;
+pub mod error;
+pub mod plant;
+pub mod sim;
+pub mod sysid;
+
+pub use config::ConfigError;
+pub use error::{Category, Categorized};

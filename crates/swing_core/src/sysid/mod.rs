@@ -1,0 +1,2 @@
+//! System identification from flight data: DMDc, HAVOKc, white-box baseline, NMAE, search.
+

@@ -1,0 +1,7 @@
+"""Allow ``python -m swingrt``."""
+
+import sys
+
+from swingrt.cli import main
+
+sys.exit(main())

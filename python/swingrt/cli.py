@@ -1,0 +1,73 @@
+"""The ``swingrt`` command line (DESIGN section 7).
+
+Each subcommand lives in ``swingrt.commands.<name>`` and exposes ``add_parser(subparsers)``
+and ``run(args) -> int``. Every user mistake ends with one line on stderr and a non-zero
+exit status, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from swingrt.errors import SwingrtError
+
+#: Subcommand modules, in the order ``swingrt --help`` lists them.
+COMMANDS = (
+    "run",
+    "simulate",
+    "collect",
+    "identify",
+    "evaluate",
+    "experiment",
+    "sitl",
+    "fly",
+    "bench",
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Build the argument parser with every available subcommand."""
+    from swingrt import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="swingrt",
+        description="Identify and damp the swing of an unknown suspended payload.",
+    )
+    parser.add_argument("--version", action="version", version=f"swingrt {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMANDS:
+        try:
+            module = importlib.import_module(f"swingrt.commands.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name == f"swingrt.commands.{name}":
+                continue  # subcommand not shipped in this build
+            raise
+        p = module.add_parser(sub)
+        p.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the console script; returns the process exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "_run", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args._run(args) or 0)
+    except SwingrtError as exc:
+        print(f"swingrt: error: {exc}", file=sys.stderr)
+        return 2
+    except FileNotFoundError as exc:
+        print(f"swingrt: error: no such file: {exc.filename}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("swingrt: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
