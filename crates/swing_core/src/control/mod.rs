@@ -1,2 +1,90 @@
-//! Swing-damping and flight control: PX4 cascade, LQR and MPC.
+//! Swing-damping and flight control: PX4's cascade, the LQR baseline and the MPC.
+//!
+//! A [`SwingController`] replaces PX4's velocity PID on one or two horizontal axes: it reads
+//! the measured velocity and swing of each controlled axis and writes the acceleration
+//! setpoint PX4's attitude generation then tracks (thesis figure 5.1, chapter 5).
 
+use thiserror::Error;
+
+use crate::error::{Categorized, Category};
+
+/// Measured state of one controlled horizontal axis (North or East).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AxisState {
+    /// Velocity along the axis [m/s].
+    pub v: f64,
+    /// Payload swing angle in the axis–Down plane [rad].
+    pub swing: f64,
+    /// Swing angle rate [rad/s].
+    pub swing_rate: f64,
+}
+
+/// How a controller tick produced its output.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TickKind {
+    /// A precomputed linear law (no constraint active).
+    #[default]
+    Unconstrained,
+    /// A constrained QP was solved.
+    Constrained,
+}
+
+/// What one controller tick did, for logging.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TickInfo {
+    /// Whether the QP was needed.
+    pub kind: TickKind,
+    /// Solver iterations (0 for the linear law).
+    pub iterations: u32,
+}
+
+/// Errors of controller synthesis and stepping.
+#[derive(Debug, Error)]
+pub enum ControlError {
+    /// Invalid controller settings.
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
+    /// The model does not fit the controller (dimensions, missing states, unstable …).
+    #[error("model: {0}")]
+    Model(String),
+    /// A Riccati equation or other synthesis step has no (stabilising) solution.
+    #[error("synthesis failed: {0}")]
+    Synthesis(String),
+    /// The QP solver failed on a tick.
+    #[error("QP solver: {0}")]
+    Solver(String),
+    /// Measurements or references of the wrong length or not finite.
+    #[error("input: {0}")]
+    Input(String),
+}
+
+impl Categorized for ControlError {
+    fn category(&self) -> Category {
+        match self {
+            ControlError::Config(_) => Category::Config,
+            ControlError::Model(_) => Category::Model,
+            ControlError::Synthesis(_) => Category::Control,
+            ControlError::Solver(_) => Category::Solver,
+            ControlError::Input(_) => Category::Data,
+        }
+    }
+}
+
+/// A swing-damping controller in place of PX4's velocity PID on the controlled axes.
+///
+/// Slices have one entry per controlled axis, in the order North, East.
+pub trait SwingController: Send {
+    /// Number of controlled horizontal axes (1 = North, 2 = North + East).
+    fn axes(&self) -> usize;
+    /// Tick period [s]; the runner calls [`SwingController::step`] at this rate.
+    fn period(&self) -> f64;
+    /// Start from the given measured state and acceleration setpoint (bumpless transfer).
+    fn reset(&mut self, state: &[AxisState], acc: &[f64]);
+    /// One tick: measured state and velocity reference in, acceleration setpoint [m/s²] out.
+    fn step(
+        &mut self,
+        state: &[AxisState],
+        vel_ref: &[f64],
+        acc_out: &mut [f64],
+    ) -> Result<TickInfo, ControlError>;
+}
