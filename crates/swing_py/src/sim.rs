@@ -142,7 +142,10 @@ impl PySimulator {
     /// Set one axis (0 = N, 1 = E, 2 = D) to mode `pos`, `vel` or `acc` with `value` (SI).
     fn set_setpoint(&mut self, axis: usize, mode: &str, value: f64) -> PyResult<()> {
         if axis > 2 {
-            return Err(to_py(ConfigError::new("axis", "must be 0 (N), 1 (E) or 2 (D)")));
+            return Err(to_py(ConfigError::new(
+                "axis",
+                "must be 0 (N), 1 (E) or 2 (D)",
+            )));
         }
         if !value.is_finite() {
             return Err(to_py(ConfigError::new(
@@ -169,8 +172,7 @@ impl PySimulator {
     fn state<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let s = self.inner.state();
         let d = PyDict::new(py);
-        let (roll, pitch, yaw) =
-            nalgebra::UnitQuaternion::from_quaternion(s.att).euler_angles();
+        let (roll, pitch, yaw) = nalgebra::UnitQuaternion::from_quaternion(s.att).euler_angles();
         let swing = self.inner.measured_swing();
         let truth = self.inner.true_swing();
         let fc = self.inner.cascade();
