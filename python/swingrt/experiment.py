@@ -133,7 +133,7 @@ def cases(exp: Experiment) -> list[tuple[str, dict[str, Any]]]:
     for values in itertools.product(*(exp.grid[k] for k in keys)):
         over: dict[str, Any] = {}
         label = []
-        for k, v in zip(keys, values):
+        for k, v in zip(keys, values, strict=True):
             _set_dotted(over, k, v)
             short = k.split(".")[-1]
             short = {"mass": "mp", "length": "l"}.get(short, short)
@@ -170,7 +170,9 @@ def training_scenario(exp: Experiment, over: dict[str, Any], seed: int) -> dict[
     sc = _merge(builtin("training"), copy.deepcopy(exp.common))
     sc = _merge(sc, copy.deepcopy(over))
     if exp.axes == "ne":
-        sc = _merge(sc, {"random_steps": {"axes": "ne"}, "setpoints": [{"t": 0.0, "vn": 0.0, "ve": 0.0}]})
+        sc = _merge(
+            sc, {"random_steps": {"axes": "ne"}, "setpoints": [{"t": 0.0, "vn": 0.0, "ve": 0.0}]}
+        )
     sc = _merge(sc, copy.deepcopy(exp.training))
     sc["duration"] = float(exp.training_duration)
     sc["name"] = "training"
@@ -389,29 +391,34 @@ def plot_case(path: Path, title: str, traces: dict[str, Trace], axes: str) -> No
 
 
 def plot_prediction(path: Path, prediction: dict[str, Any], flown: Trace, model) -> None:
-    """The MPC's predicted outputs at the step against the trajectory actually flown."""
+    """The MPC's predicted velocity and swing at the step against the flight actually flown.
+
+    The prediction is Np steps × axes × [v, swing rate, swing] (``MpcController``'s layout)
+    from the tick at ``prediction['t0']``, at the model's dt.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     outs = np.asarray(prediction["outputs"])
-    n_out = len(model.states)
-    steps = len(outs) // n_out
-    pred = outs[: steps * n_out].reshape(steps, n_out)
+    axes = len(model.inputs)
+    steps = len(outs) // (3 * axes)
+    pred = outs[: steps * 3 * axes].reshape(steps, axes, 3)
     tp = prediction["t0"] + model.dt * np.arange(1, steps + 1)
-    fig, ax = plt.subplots(n_out, 1, figsize=(7, 2.8 * n_out), sharex=True, squeeze=False)
-    for i, name in enumerate(model.states):
-        scale = 57.29577951308232 if name.startswith("swing") else 1.0
-        unit = "deg" if scale != 1.0 else "m/s"
-        mask = (flown.t >= tp[0] - model.dt) & (flown.t <= tp[-1])
-        ax[i, 0].plot(flown.t[mask], flown[name][mask] * scale, "k", label="flown")
-        ax[i, 0].plot(tp, pred[:, i] * scale, "tab:red", ls="--", label="MPC prediction")
-        ax[i, 0].set_ylabel(f"{name} [{unit}]")
-        ax[i, 0].grid(alpha=0.3)
-    ax[0, 0].legend()
-    ax[-1, 0].set_xlabel("t [s]")
-    fig.suptitle("MPC prediction at the step vs flown (double pendulum)")
+    mask = (flown.t >= tp[0] - model.dt) & (flown.t <= tp[-1])
+    fig, ax = plt.subplots(2, 1, figsize=(7, 5.6), sharex=True)
+    ax[0].plot(flown.t[mask], flown["vn"][mask], "k", label="flown")
+    ax[0].plot(tp, pred[:, 0, 0], "tab:red", ls="--", label="MPC prediction")
+    ax[0].set_ylabel("v_N [m/s]")
+    ax[1].plot(flown.t[mask], np.degrees(flown["swing_n"][mask]), "k", label="flown")
+    ax[1].plot(tp, np.degrees(pred[:, 0, 2]), "tab:red", ls="--", label="MPC prediction")
+    ax[1].set_ylabel("swing_n [deg]")
+    ax[1].set_xlabel("t [s]")
+    for a in ax:
+        a.grid(alpha=0.3)
+    ax[0].legend()
+    fig.suptitle(f"MPC prediction at t = {prediction['t0']:.2f} s vs flown")
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=110)

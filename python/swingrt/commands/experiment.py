@@ -33,6 +33,6 @@ def run(args) -> int:
     exp = load_experiment(args.name)
     out = args.out or f"runs/{exp.name}"
     rows = run_experiment(exp, out, seed=args.seed, quiet=args.quiet)
-    print((open(f"{out}/metrics.md", encoding="utf-8").read()))
+    print(open(f"{out}/metrics.md", encoding="utf-8").read())
     print(f"wrote {out}/ ({len(rows)} runs)")
     return 0
