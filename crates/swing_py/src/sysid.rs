@@ -4,7 +4,7 @@
 //! way in); data as C-contiguous float64 arrays of shape (samples, columns), borrowed
 //! without copies. Long calls release the GIL.
 
-use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyList;
 use swing_core::sysid::dmdc::{self, DmdcSettings};
@@ -163,11 +163,12 @@ fn sysid_search<'py>(
         rank_window: None,
     };
     let (n, m) = (cols(&xa), cols(&ua));
+    let (n2, m2) = (cols(&xb), cols(&ub));
     let (s1, s2, s3, s4) = (xa.as_slice()?, ua.as_slice()?, xb.as_slice()?, ub.as_slice()?);
     let res = py
         .detach(|| {
             let train = Trajectory::new(s1, n, s2, m)?;
-            let test = Trajectory::new(s3, cols(&xb), s4, cols(&ub))?;
+            let test = Trajectory::new(s3, n2, s4, m2)?;
             match fine {
                 Some((qr, pr)) => coarse_to_fine(&train, &test, &grid, qr, pr, &settings),
                 None => grid_search(&train, &test, &grid, &settings),
