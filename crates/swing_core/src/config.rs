@@ -40,7 +40,10 @@ pub fn finite(field: &str, v: f64) -> Result<(), ConfigError> {
     if v.is_finite() {
         Ok(())
     } else {
-        Err(ConfigError::new(field, format!("must be a finite number (got {v})")))
+        Err(ConfigError::new(
+            field,
+            format!("must be a finite number (got {v})"),
+        ))
     }
 }
 

@@ -14,4 +14,4 @@ pub mod sim;
 pub mod sysid;
 
 pub use config::ConfigError;
-pub use error::{Category, Categorized};
+pub use error::{Categorized, Category};

@@ -4,6 +4,8 @@
 //! the measured velocity and swing of each controlled axis and writes the acceleration
 //! setpoint PX4's attitude generation then tracks (thesis figure 5.1, chapter 5).
 
+pub mod px4;
+
 use thiserror::Error;
 
 use crate::error::{Categorized, Category};

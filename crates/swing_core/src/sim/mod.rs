@@ -1,0 +1,9 @@
+//! Closed-loop simulation: scenario files, the multi-rate runner and traces.
+
+pub mod runner;
+pub mod scenario;
+pub mod trace;
+
+pub use runner::{SimError, Simulator};
+pub use scenario::{NoiseParams, RandomSteps, Scenario, SetpointEntry};
+pub use trace::Trace;

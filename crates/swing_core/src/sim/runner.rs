@@ -1,0 +1,581 @@
+//! The multi-rate closed-loop runner: plant at the physics step (RK4, 1 ms default), PX4's
+//! rate, attitude and position/velocity loops at their own rates, an optional swing-damping
+//! controller in place of PX4's velocity PID, sensor noise, wind and a 100 Hz trace.
+//!
+//! All loop periods are integer multiples of the physics step, so a run is a pure function
+//! of the scenario (and its seed).
+
+use std::time::Instant;
+
+use nalgebra::{UnitQuaternion, Vector3, Vector4};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use thiserror::Error;
+
+use super::scenario::{Scenario, SetpointEntry};
+use super::trace::{Trace, BASE_COLUMNS, DOUBLE_COLUMNS};
+use crate::config::ConfigError;
+use crate::control::px4::{AxisSetpoint, Px4Cascade, Setpoint};
+use crate::control::{AxisState, SwingController};
+use crate::error::{Categorized, Category};
+use crate::plant::dynamics::swing_angles;
+use crate::plant::{Effects, Model, PayloadKind, PlantState, StepInput, Wind};
+
+/// Errors of a simulation run.
+#[derive(Debug, Error)]
+pub enum SimError {
+    /// The scenario or a runner setting is invalid.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// The state became non-finite or left any sensible range.
+    #[error("simulation diverged at t = {t:.3} s: {what}")]
+    Diverged {
+        /// Time of detection [s].
+        t: f64,
+        /// What went wrong.
+        what: String,
+    },
+}
+
+impl Categorized for SimError {
+    fn category(&self) -> Category {
+        match self {
+            SimError::Config(_) => Category::Config,
+            SimError::Diverged { .. } => Category::Simulation,
+        }
+    }
+}
+
+/// Timing statistics of the swing controller's ticks (wall clock; not part of the trace).
+#[derive(Clone, Debug, Default)]
+pub struct TickStats {
+    /// Compute time of every tick [µs].
+    pub tick_us: Vec<f64>,
+    /// Ticks that needed the constrained QP.
+    pub constrained: usize,
+}
+
+struct Attached {
+    ctrl: Box<dyn SwingController>,
+    div: u64,
+    budget: f64,
+    engage_at: f64,
+    started: bool,
+    acc: [f64; 2],
+    vel_ref: [f64; 2],
+}
+
+/// A steppable closed-loop simulation of vehicle, payload, PX4 cascade and wind.
+pub struct Simulator {
+    sc: Scenario,
+    model: Model,
+    fx: Effects,
+    state: PlantState,
+    fc: Px4Cascade,
+    wind: Wind,
+    wind_now: Vector3<f64>,
+    rng: ChaCha8Rng,
+    h: f64,
+    step: u64,
+    end_step: u64,
+    div_rate: u64,
+    div_att: u64,
+    div_pos: u64,
+    div_log: u64,
+    div_noise: u64,
+    schedule: Vec<SetpointEntry>,
+    next_entry: usize,
+    sp: Setpoint,
+    motor_sp: Vector4<f64>,
+    swing_noise: [f64; 2],
+    meas_pos: Vector3<f64>,
+    meas_vel: Vector3<f64>,
+    acc_bias: Vector3<f64>,
+    attached: Option<Attached>,
+    ctrl_active: bool,
+    fallback: bool,
+    fallback_reason: Option<String>,
+    stats: TickStats,
+    trace: Trace,
+    row: Vec<f64>,
+}
+
+impl Simulator {
+    /// Build a simulator at trimmed hover from a scenario (validated here).
+    pub fn new(sc: Scenario) -> Result<Self, SimError> {
+        sc.validate()?;
+        let h = sc.physics_dt;
+        let div = |hz: f64| ((1.0 / (hz * h)).round() as u64).max(1);
+        let model = Model::new(sc.vehicle.clone(), sc.payload.clone());
+        let total = model.total_mass();
+        let hover_total = Px4Cascade::hover_thrust_for(&sc.vehicle, total);
+        if hover_total > sc.controller.thrust_max * 0.9 {
+            return Err(ConfigError::new(
+                "payload.mass",
+                format!(
+                    "vehicle and payload ({total:.3} kg) need {:.0} % thrust to hover; too heavy",
+                    hover_total * 100.0
+                ),
+            )
+            .into());
+        }
+        let believed = if sc.controller.hover_thrust > 0.0 {
+            sc.controller.hover_thrust
+        } else {
+            hover_total
+        };
+        let mut fc = Px4Cascade::new(sc.controller.clone(), believed);
+        fc.trim_collective(hover_total);
+        let start = Vector3::from(sc.start);
+        let p = &sc.payload;
+        let mut state = PlantState::at_rest(
+            start,
+            total * crate::plant::GRAVITY / 4.0,
+            p.initial_swing_n,
+            p.initial_swing_e,
+        );
+        state.project(model.links());
+        let mut names: Vec<&str> = BASE_COLUMNS.to_vec();
+        if sc.payload.kind == PayloadKind::Double {
+            names.extend(DOUBLE_COLUMNS);
+        }
+        let rows = (sc.duration * sc.log_rate).ceil() as usize + 1;
+        let schedule = sc.schedule();
+        let wind = Wind::new(sc.wind.clone(), sc.seed);
+        let acc_bias = Vector3::new(sc.noise.acc_sp_bias[0], sc.noise.acc_sp_bias[1], 0.0);
+        let mut sim = Self {
+            model,
+            fx: Effects::default(),
+            state,
+            motor_sp: Vector4::repeat(total * crate::plant::GRAVITY / 4.0),
+            wind_now: wind.at(0.0),
+            wind,
+            rng: ChaCha8Rng::seed_from_u64(sc.seed ^ 0x4e4f_4953),
+            h,
+            step: 0,
+            end_step: (sc.duration / h).round() as u64,
+            div_rate: div(sc.controller.rate_loop_hz),
+            div_att: div(sc.controller.att_loop_hz),
+            div_pos: div(sc.controller.pos_loop_hz),
+            div_log: div(sc.log_rate),
+            div_noise: div(sc.noise.swing_rate),
+            schedule,
+            next_entry: 0,
+            sp: Setpoint::hold(start),
+            swing_noise: [0.0; 2],
+            meas_pos: start,
+            meas_vel: Vector3::zeros(),
+            acc_bias,
+            attached: None,
+            ctrl_active: false,
+            fallback: false,
+            fallback_reason: None,
+            stats: TickStats::default(),
+            trace: Trace::new(&names, rows),
+            row: vec![0.0; names.len()],
+            fc,
+            sc,
+        };
+        sim.apply_schedule();
+        Ok(sim)
+    }
+
+    /// Replace PX4's velocity PID on the controller's axes from time `engage_at` [s] on.
+    ///
+    /// A tick whose compute time exceeds `budget` [s] or that fails hands the axes back to
+    /// PX4's velocity PID for the rest of the run (logged as `fallback` = 1).
+    pub fn attach_controller(
+        &mut self,
+        ctrl: Box<dyn SwingController>,
+        engage_at: f64,
+        budget: f64,
+    ) -> Result<(), SimError> {
+        let period = ctrl.period();
+        let steps = period / self.h;
+        if !(steps >= 1.0 - 1e-9 && (steps - steps.round()).abs() < 1e-6) {
+            return Err(ConfigError::new(
+                "controller.period",
+                format!(
+                    "{period} s is not a multiple of the physics step {} s",
+                    self.h
+                ),
+            )
+            .into());
+        }
+        if !(1..=2).contains(&ctrl.axes()) {
+            return Err(ConfigError::new("controller.axes", "must be 1 (N) or 2 (N+E)").into());
+        }
+        crate::config::non_negative("controller.engage_at", engage_at)?;
+        crate::config::positive("controller.budget", budget)?;
+        self.attached = Some(Attached {
+            ctrl,
+            div: steps.round() as u64,
+            budget,
+            engage_at,
+            started: false,
+            acc: [0.0; 2],
+            vel_ref: [0.0; 2],
+        });
+        Ok(())
+    }
+
+    /// Switch idealised effects (drag, friction, rotors) for experiments.
+    pub fn set_effects(&mut self, fx: Effects) {
+        self.fx = fx;
+    }
+
+    /// Override the setpoint of one axis (0 = N, 1 = E, 2 = D) from now on.
+    pub fn set_setpoint(&mut self, axis: usize, sp: AxisSetpoint) {
+        if axis < 3 {
+            self.sp.axes[axis] = sp;
+        }
+    }
+
+    /// Current time [s].
+    pub fn time(&self) -> f64 {
+        self.step as f64 * self.h
+    }
+
+    /// Scenario duration [s].
+    pub fn duration(&self) -> f64 {
+        self.sc.duration
+    }
+
+    /// The scenario this simulator runs.
+    pub fn scenario(&self) -> &Scenario {
+        &self.sc
+    }
+
+    /// The true plant state.
+    pub fn state(&self) -> &PlantState {
+        &self.state
+    }
+
+    /// The plant model.
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    /// The PX4 cascade (setpoints and integrators).
+    pub fn cascade(&self) -> &Px4Cascade {
+        &self.fc
+    }
+
+    /// The trace logged so far.
+    pub fn trace(&self) -> &Trace {
+        &self.trace
+    }
+
+    /// Take the trace out, leaving an empty one with the same columns.
+    pub fn take_trace(&mut self) -> Trace {
+        let names: Vec<String> = self.trace.names().to_vec();
+        let refs: Vec<&str> = names.iter().map(String::as_str).collect();
+        std::mem::replace(&mut self.trace, Trace::new(&refs, 0))
+    }
+
+    /// Controller tick timings so far.
+    pub fn tick_stats(&self) -> &TickStats {
+        &self.stats
+    }
+
+    /// Why the controller was handed back to PX4, if it was.
+    pub fn fallback_reason(&self) -> Option<&str> {
+        self.fallback_reason.as_deref()
+    }
+
+    /// The latest measured (noisy) swing angles (N, E) [rad].
+    pub fn measured_swing(&self) -> [f64; 2] {
+        let [sn, se, _, _] = swing_angles(&self.state.n[0], &self.state.ndot[0]);
+        if self.model.links() == 0 {
+            return [0.0, 0.0];
+        }
+        [sn + self.swing_noise[0], se + self.swing_noise[1]]
+    }
+
+    /// True swing angles and rates of the first link: (N, E, rate N, rate E).
+    pub fn true_swing(&self) -> [f64; 4] {
+        if self.model.links() == 0 {
+            return [0.0; 4];
+        }
+        swing_angles(&self.state.n[0], &self.state.ndot[0])
+    }
+
+    /// Advance by `seconds` (rounded to whole physics steps), logging as it goes.
+    pub fn advance(&mut self, seconds: f64) -> Result<(), SimError> {
+        let n = (seconds / self.h).round().max(0.0) as u64;
+        for _ in 0..n {
+            self.physics_step()?;
+        }
+        Ok(())
+    }
+
+    /// Run until the scenario's duration and log the final sample.
+    pub fn run_to_end(&mut self) -> Result<(), SimError> {
+        while self.step < self.end_step {
+            self.physics_step()?;
+        }
+        if self.step % self.div_log == 0 {
+            self.log_row();
+        }
+        Ok(())
+    }
+
+    /// Run the whole scenario and return its trace.
+    pub fn run(sc: Scenario) -> Result<Trace, SimError> {
+        let mut sim = Simulator::new(sc)?;
+        sim.run_to_end()?;
+        Ok(sim.take_trace())
+    }
+
+    /// Steps remaining until the scenario's end.
+    pub fn steps_left(&self) -> u64 {
+        self.end_step.saturating_sub(self.step)
+    }
+
+    fn apply_schedule(&mut self) {
+        let t = self.time() + 1e-9;
+        while self.next_entry < self.schedule.len() && self.schedule[self.next_entry].t <= t {
+            let e = self.schedule[self.next_entry].clone();
+            for i in 0..3 {
+                if let Some((mode, v)) = e.axis(i) {
+                    self.sp.axes[i] = match mode {
+                        'p' => AxisSetpoint::Position(v),
+                        'v' => AxisSetpoint::Velocity(v),
+                        _ => AxisSetpoint::Acceleration(v),
+                    };
+                }
+            }
+            if let Some(y) = e.yaw {
+                self.sp.yaw = y;
+            }
+            self.next_entry += 1;
+        }
+    }
+
+    fn physics_step(&mut self) -> Result<(), SimError> {
+        let k = self.step;
+        self.apply_schedule();
+        if self.sc.noise.swing_std > 0.0 && k % self.div_noise == 0 {
+            for i in 0..2 {
+                let z: f64 = StandardNormal.sample(&mut self.rng);
+                self.swing_noise[i] = self.sc.noise.swing_std * z;
+            }
+        }
+        if k % self.div_pos == 0 {
+            self.measure_translation();
+        }
+        if let Some(div) = self.attached.as_ref().map(|a| a.div) {
+            if k % div == 0 && !self.fallback {
+                self.controller_tick();
+            }
+        }
+        if k % self.div_pos == 0 {
+            let mut sp = self.sp;
+            if self.ctrl_active {
+                if let Some(a) = &self.attached {
+                    for i in 0..a.ctrl.axes() {
+                        sp.axes[i] = AxisSetpoint::Acceleration(a.acc[i]);
+                    }
+                }
+            }
+            let dt = self.div_pos as f64 * self.h;
+            self.fc
+                .position_velocity(&sp, &self.meas_pos, &self.meas_vel, dt, &self.acc_bias);
+        }
+        if k % self.div_att == 0 {
+            self.fc.attitude(&self.state.att);
+        }
+        if k % self.div_rate == 0 {
+            let dt = self.div_rate as f64 * self.h;
+            self.fc.rates(&self.state.rate, dt);
+            self.motor_sp = self.fc.motor_thrust_setpoints(&self.sc.vehicle);
+        }
+        if k % self.div_log == 0 {
+            self.log_row();
+            self.check_finite()?;
+        }
+        let t = self.time();
+        self.wind.advance(self.h);
+        self.wind_now = self.wind.at(t);
+        let u = StepInput {
+            thrust_sp: self.motor_sp,
+            wind: self.wind_now,
+            external_force: Vector3::zeros(),
+        };
+        self.state = self.model.rk4(&self.state, &u, self.h, self.fx);
+        self.step += 1;
+        Ok(())
+    }
+
+    fn measure_translation(&mut self) {
+        self.meas_pos = self.state.pos;
+        self.meas_vel = self.state.vel;
+        let n = &self.sc.noise;
+        if n.position_std > 0.0 || n.velocity_std > 0.0 {
+            for i in 0..3 {
+                let zp: f64 = StandardNormal.sample(&mut self.rng);
+                let zv: f64 = StandardNormal.sample(&mut self.rng);
+                self.meas_pos[i] += n.position_std * zp;
+                self.meas_vel[i] += n.velocity_std * zv;
+            }
+        }
+    }
+
+    fn controller_tick(&mut self) {
+        let t = self.time();
+        let swing = self.measured_swing();
+        let truth = self.true_swing();
+        let pos_p = self.sc.controller.pos_p;
+        let vel_max = self.sc.controller.vel_max_xy;
+        let Some(a) = self.attached.as_mut() else {
+            return;
+        };
+        if t + 1e-9 < a.engage_at {
+            return;
+        }
+        let axes = a.ctrl.axes();
+        let mut states = [AxisState::default(); 2];
+        let mut vel_ref = [0.0; 2];
+        for i in 0..axes {
+            states[i] = AxisState {
+                v: self.meas_vel[i],
+                swing: swing[i],
+                swing_rate: truth[2 + i],
+            };
+            vel_ref[i] = match self.sp.axes[i] {
+                AxisSetpoint::Velocity(v) => v,
+                AxisSetpoint::Position(x) => {
+                    ((x - self.meas_pos[i]) * pos_p[i]).clamp(-vel_max, vel_max)
+                }
+                AxisSetpoint::Acceleration(_) => 0.0,
+            };
+        }
+        if !a.started {
+            let acc = [self.fc.acc_sp.x, self.fc.acc_sp.y];
+            a.ctrl.reset(&states[..axes], &acc[..axes]);
+            a.acc = acc;
+            a.started = true;
+        }
+        let mut out = [0.0; 2];
+        let t0 = Instant::now();
+        let res = a
+            .ctrl
+            .step(&states[..axes], &vel_ref[..axes], &mut out[..axes]);
+        let elapsed = t0.elapsed().as_secs_f64();
+        self.stats.tick_us.push(elapsed * 1e6);
+        let reason = match &res {
+            Err(e) => Some(format!("controller error: {e}")),
+            Ok(_) if elapsed > a.budget => Some(format!(
+                "tick took {:.3} ms, over its {:.3} ms budget",
+                elapsed * 1e3,
+                a.budget * 1e3
+            )),
+            Ok(_) if out[..axes].iter().any(|x| !x.is_finite()) => {
+                Some("controller output is not finite".to_string())
+            }
+            Ok(_) => None,
+        };
+        if let Ok(info) = res {
+            if info.kind == crate::control::TickKind::Constrained {
+                self.stats.constrained += 1;
+            }
+        }
+        a.vel_ref = vel_ref;
+        match reason {
+            None => {
+                a.acc = out;
+                self.ctrl_active = true;
+            }
+            Some(r) => {
+                // Bumpless hand-back: PX4's velocity integrator takes the last command.
+                for i in 0..axes {
+                    let err = vel_ref[i] - self.meas_vel[i];
+                    let v = a.acc[i] - err * self.sc.controller.vel_p[i];
+                    self.fc.set_velocity_integrator(i, v);
+                    self.sp.axes[i] = AxisSetpoint::Velocity(vel_ref[i]);
+                }
+                self.ctrl_active = false;
+                self.fallback = true;
+                self.fallback_reason = Some(format!("t = {t:.2} s: {r}"));
+            }
+        }
+    }
+
+    fn check_finite(&self) -> Result<(), SimError> {
+        let s = &self.state;
+        let ok = s.pos.iter().all(|x| x.is_finite() && x.abs() < 1e6)
+            && s.vel.iter().all(|x| x.is_finite() && x.abs() < 1e3)
+            && s.rate.iter().all(|x| x.is_finite() && x.abs() < 1e4)
+            && s.att.coords.iter().all(|x| x.is_finite());
+        if ok {
+            Ok(())
+        } else {
+            Err(SimError::Diverged {
+                t: self.time(),
+                what: "vehicle state is not finite or out of range".into(),
+            })
+        }
+    }
+
+    fn log_row(&mut self) {
+        let s = &self.state;
+        let (roll, pitch, yaw) = UnitQuaternion::from_quaternion(s.att).euler_angles();
+        let truth = self.true_swing();
+        let meas = self.measured_swing();
+        let payload = if self.model.links() > 0 {
+            s.payload_position(&self.sc.payload, 0)
+        } else {
+            s.pos
+        };
+        let mut vel_sp = self.fc.vel_sp;
+        if let Some(a) = &self.attached {
+            if self.ctrl_active {
+                for i in 0..a.ctrl.axes() {
+                    vel_sp[i] = a.vel_ref[i];
+                }
+            }
+        }
+        let r = &mut self.row;
+        let vals = [
+            self.step as f64 * self.h,
+            s.pos.x,
+            s.pos.y,
+            s.pos.z,
+            s.vel.x,
+            s.vel.y,
+            s.vel.z,
+            roll,
+            pitch,
+            yaw,
+            meas[0],
+            meas[1],
+            truth[2],
+            truth[3],
+            self.fc.acc_sp.x,
+            self.fc.acc_sp.y,
+            self.fc.acc_sp.z,
+            vel_sp.x,
+            vel_sp.y,
+            vel_sp.z,
+            s.thrust.sum(),
+            self.wind_now.x,
+            self.wind_now.y,
+            self.wind_now.z,
+            truth[0],
+            truth[1],
+            payload.x,
+            payload.y,
+            payload.z,
+            self.ctrl_active as u8 as f64,
+            self.fallback as u8 as f64,
+        ];
+        r[..vals.len()].copy_from_slice(&vals);
+        if self.model.links() == 2 {
+            let [s2n, s2e, _, _] = swing_angles(&s.n[1], &s.ndot[1]);
+            r[vals.len()] = s2n;
+            r[vals.len() + 1] = s2e;
+        }
+        self.trace.push(&self.row);
+    }
+}

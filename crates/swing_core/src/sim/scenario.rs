@@ -1,0 +1,454 @@
+//! Scenario files: vehicle, payload, wind, sensor noise, setpoint schedule and duration.
+//!
+//! One struct validates TOML and JSON alike (`deny_unknown_fields`); errors name the field by
+//! its dotted path, e.g. `payload.mass: must be > 0 (got -0.1)` or
+//! `payload.masss: unknown field`.
+
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::config::{finite, in_range, non_negative, positive, ConfigError};
+use crate::control::px4::Px4Params;
+use crate::plant::{PayloadParams, VehicleParams, WindParams};
+
+/// Sensor noise and bias (seeded by the scenario seed).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NoiseParams {
+    /// Standard deviation of the swing-angle measurement noise [rad] (0 = off).
+    pub swing_std: f64,
+    /// Sample rate of the band-limited swing noise (a new value every 1/rate) [Hz].
+    pub swing_rate: f64,
+    /// Standard deviation of the velocity estimate noise [m/s].
+    pub velocity_std: f64,
+    /// Standard deviation of the position estimate noise [m].
+    pub position_std: f64,
+    /// Constant offset between commanded and realised horizontal acceleration (N, E) [m/s²]
+    /// — the seed's IMU offset (section 4.6.6).
+    pub acc_sp_bias: [f64; 2],
+}
+
+impl Default for NoiseParams {
+    fn default() -> Self {
+        Self {
+            swing_std: 0.0,
+            swing_rate: 100.0,
+            velocity_std: 0.0,
+            position_std: 0.0,
+            acc_sp_bias: [0.0, 0.0],
+        }
+    }
+}
+
+impl NoiseParams {
+    /// Check the settings; the error names the offending field.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        non_negative("swing_std", self.swing_std)?;
+        positive("swing_rate", self.swing_rate)?;
+        non_negative("velocity_std", self.velocity_std)?;
+        non_negative("position_std", self.position_std)?;
+        crate::config::all_finite("acc_sp_bias", &self.acc_sp_bias)?;
+        Ok(())
+    }
+}
+
+/// One entry of the setpoint schedule: from time `t` on, each named axis takes the new
+/// setpoint; axes not named keep theirs. Per axis give at most one of position (`p*`),
+/// velocity (`v*`) or acceleration (`a*`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SetpointEntry {
+    /// Time the entry takes effect [s].
+    pub t: f64,
+    /// North position [m].
+    pub pn: Option<f64>,
+    /// East position [m].
+    pub pe: Option<f64>,
+    /// Down position [m].
+    pub pd: Option<f64>,
+    /// North velocity [m/s].
+    pub vn: Option<f64>,
+    /// East velocity [m/s].
+    pub ve: Option<f64>,
+    /// Down velocity [m/s].
+    pub vd: Option<f64>,
+    /// North acceleration [m/s²].
+    pub an: Option<f64>,
+    /// East acceleration [m/s²].
+    pub ae: Option<f64>,
+    /// Down acceleration [m/s²].
+    pub ad: Option<f64>,
+    /// Yaw [rad].
+    pub yaw: Option<f64>,
+}
+
+impl SetpointEntry {
+    /// Per axis (N, E, D): the (mode, value) this entry sets, if any.
+    pub fn axis(&self, i: usize) -> Option<(char, f64)> {
+        let (p, v, a) = match i {
+            0 => (self.pn, self.vn, self.an),
+            1 => (self.pe, self.ve, self.ae),
+            _ => (self.pd, self.vd, self.ad),
+        };
+        p.map(|x| ('p', x))
+            .or(v.map(|x| ('v', x)))
+            .or(a.map(|x| ('a', x)))
+    }
+
+    fn validate(&self) -> Result<(), ConfigError> {
+        non_negative("t", self.t)?;
+        let names = [["pn", "vn", "an"], ["pe", "ve", "ae"], ["pd", "vd", "ad"]];
+        let vals = [
+            [self.pn, self.vn, self.an],
+            [self.pe, self.ve, self.ae],
+            [self.pd, self.vd, self.ad],
+        ];
+        for (axis, row) in vals.iter().enumerate() {
+            let given: Vec<usize> = (0..3).filter(|k| row[*k].is_some()).collect();
+            if given.len() > 1 {
+                return Err(ConfigError::new(
+                    names[axis][given[1]],
+                    format!(
+                        "conflicts with `{}` in the same entry",
+                        names[axis][given[0]]
+                    ),
+                ));
+            }
+            for k in given {
+                finite(names[axis][k], row[k].unwrap_or(0.0))?;
+            }
+        }
+        if let Some(y) = self.yaw {
+            finite("yaw", y)?;
+        }
+        Ok(())
+    }
+}
+
+/// The thesis's random velocity steps (section 4.6.1, table 4.1): step values and hold
+/// times drawn uniformly, seeded.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RandomSteps {
+    /// Axes stepped: `n`, `e` or `ne`.
+    pub axes: String,
+    /// Time of the first step [s].
+    pub start: f64,
+    /// Smallest velocity step value [m/s].
+    pub v_min: f64,
+    /// Largest velocity step value [m/s].
+    pub v_max: f64,
+    /// Shortest hold time [s].
+    pub interval_min: f64,
+    /// Longest hold time [s].
+    pub interval_max: f64,
+    /// Draw the sign at random too (values in ±[v_min, v_max]); the table's range is one-sided.
+    pub symmetric: bool,
+    /// Seed of the schedule (default: the scenario seed).
+    pub seed: Option<u64>,
+}
+
+impl Default for RandomSteps {
+    fn default() -> Self {
+        Self {
+            axes: "n".into(),
+            start: 2.0,
+            v_min: 0.0,
+            v_max: 3.0,
+            interval_min: 10.0,
+            interval_max: 25.0,
+            symmetric: false,
+            seed: None,
+        }
+    }
+}
+
+impl RandomSteps {
+    fn validate(&self) -> Result<(), ConfigError> {
+        if !["n", "e", "ne"].contains(&self.axes.as_str()) {
+            return Err(ConfigError::new(
+                "axes",
+                format!("must be \"n\", \"e\" or \"ne\" (got {:?})", self.axes),
+            ));
+        }
+        non_negative("start", self.start)?;
+        non_negative("v_min", self.v_min)?;
+        in_range("v_max", self.v_max, self.v_min, 12.0)?;
+        positive("interval_min", self.interval_min)?;
+        in_range("interval_max", self.interval_max, self.interval_min, 1e6)?;
+        Ok(())
+    }
+
+    /// The schedule up to `duration`, drawn from `seed` unless the settings carry their own.
+    pub fn schedule(&self, duration: f64, seed: u64) -> Vec<SetpointEntry> {
+        let mut rng = ChaCha8Rng::seed_from_u64(self.seed.unwrap_or(seed) ^ 0x5354_4550);
+        let mut out = Vec::new();
+        let mut t = self.start;
+        while t < duration {
+            let draw = |rng: &mut ChaCha8Rng| {
+                let v = if self.v_max > self.v_min {
+                    rng.random_range(self.v_min..self.v_max)
+                } else {
+                    self.v_min
+                };
+                if self.symmetric && rng.random_bool(0.5) {
+                    -v
+                } else {
+                    v
+                }
+            };
+            let mut e = SetpointEntry {
+                t,
+                ..Default::default()
+            };
+            if self.axes.contains('n') {
+                e.vn = Some(draw(&mut rng));
+            }
+            if self.axes.contains('e') {
+                e.ve = Some(draw(&mut rng));
+            }
+            out.push(e);
+            t += if self.interval_max > self.interval_min {
+                rng.random_range(self.interval_min..self.interval_max)
+            } else {
+                self.interval_min
+            };
+        }
+        out
+    }
+}
+
+/// A complete simulation scenario.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Scenario {
+    /// Free-form name used in reports.
+    pub name: String,
+    /// Simulated duration [s].
+    pub duration: f64,
+    /// Seed of every random generator of the run.
+    pub seed: u64,
+    /// Physics (RK4) step [s].
+    pub physics_dt: f64,
+    /// Trace logging rate [Hz].
+    pub log_rate: f64,
+    /// Initial vehicle position, NED [m] (held until the schedule says otherwise).
+    pub start: [f64; 3],
+    /// Vehicle parameters.
+    pub vehicle: VehicleParams,
+    /// Payload parameters.
+    pub payload: PayloadParams,
+    /// Wind.
+    pub wind: WindParams,
+    /// Sensor noise and bias.
+    pub noise: NoiseParams,
+    /// PX4 cascade gains and limits.
+    pub controller: Px4Params,
+    /// Setpoint schedule (sorted by time when loaded).
+    pub setpoints: Vec<SetpointEntry>,
+    /// Random velocity steps appended to the schedule (table 4.1).
+    pub random_steps: Option<RandomSteps>,
+}
+
+impl Default for Scenario {
+    fn default() -> Self {
+        Self {
+            name: "default".into(),
+            duration: 20.0,
+            seed: 0,
+            physics_dt: 0.001,
+            log_rate: 100.0,
+            start: [0.0, 0.0, -10.0],
+            vehicle: VehicleParams::default(),
+            payload: PayloadParams::default(),
+            wind: WindParams::default(),
+            noise: NoiseParams::default(),
+            controller: Px4Params::default(),
+            setpoints: Vec::new(),
+            random_steps: None,
+        }
+    }
+}
+
+impl Scenario {
+    /// The default `simulate` scenario: 0.2 kg on 1 m, 2 m/s North step at t = 2 s.
+    pub fn default_step() -> Self {
+        Self {
+            name: "step".into(),
+            setpoints: vec![
+                SetpointEntry {
+                    t: 0.0,
+                    vn: Some(0.0),
+                    ..Default::default()
+                },
+                SetpointEntry {
+                    t: 2.0,
+                    vn: Some(2.0),
+                    ..Default::default()
+                },
+            ],
+            ..Default::default()
+        }
+    }
+
+    /// The default `collect` scenario: random North velocity steps of table 4.1 for 300 s.
+    pub fn default_training() -> Self {
+        Self {
+            name: "training".into(),
+            duration: 300.0,
+            setpoints: vec![SetpointEntry {
+                t: 0.0,
+                vn: Some(0.0),
+                ..Default::default()
+            }],
+            random_steps: Some(RandomSteps::default()),
+            ..Default::default()
+        }
+    }
+
+    /// Parse TOML text; unknown keys and bad values give a [`ConfigError`] naming the field.
+    pub fn from_toml(text: &str) -> Result<Self, ConfigError> {
+        let de = toml::de::Deserializer::parse(text)
+            .map_err(|e| ConfigError::new("", one_line(&e.to_string())))?;
+        let sc: Scenario = serde_path_to_error::deserialize(de).map_err(path_error)?;
+        sc.validate()?;
+        Ok(sc)
+    }
+
+    /// Parse JSON text (the Python side passes dicts this way); same rules as TOML.
+    pub fn from_json(text: &str) -> Result<Self, ConfigError> {
+        let mut de = serde_json::Deserializer::from_str(text);
+        let sc: Scenario = serde_path_to_error::deserialize(&mut de).map_err(path_error)?;
+        sc.validate()?;
+        Ok(sc)
+    }
+
+    /// Check physical sense of every section; the error names the field by dotted path.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        positive("duration", self.duration)?;
+        in_range("physics_dt", self.physics_dt, 1e-5, 0.01)?;
+        positive("log_rate", self.log_rate)?;
+        if self.log_rate * self.physics_dt > 1.0 + 1e-9 {
+            return Err(ConfigError::new(
+                "log_rate",
+                "must not exceed the physics rate 1/physics_dt",
+            ));
+        }
+        crate::config::all_finite("start", &self.start)?;
+        self.vehicle.validate().map_err(|e| e.within("vehicle"))?;
+        self.payload.validate().map_err(|e| e.within("payload"))?;
+        self.wind.validate().map_err(|e| e.within("wind"))?;
+        self.noise.validate().map_err(|e| e.within("noise"))?;
+        self.controller
+            .validate()
+            .map_err(|e| e.within("controller"))?;
+        for (name, hz) in [
+            ("rate_loop_hz", self.controller.rate_loop_hz),
+            ("att_loop_hz", self.controller.att_loop_hz),
+            ("pos_loop_hz", self.controller.pos_loop_hz),
+        ] {
+            let steps = 1.0 / (hz * self.physics_dt);
+            if steps < 1.0 - 1e-9 || (steps - steps.round()).abs() > 1e-6 {
+                return Err(ConfigError::new(
+                    format!("controller.{name}"),
+                    format!(
+                        "must divide the physics rate {} Hz evenly (got {hz} Hz)",
+                        1.0 / self.physics_dt
+                    ),
+                ));
+            }
+        }
+        for (i, s) in self.setpoints.iter().enumerate() {
+            s.validate()
+                .map_err(|e| e.within(&format!("setpoints[{i}]")))?;
+        }
+        if let Some(r) = &self.random_steps {
+            r.validate().map_err(|e| e.within("random_steps"))?;
+        }
+        Ok(())
+    }
+
+    /// The full schedule: explicit entries and random steps, sorted by time (stable).
+    pub fn schedule(&self) -> Vec<SetpointEntry> {
+        let mut all = self.setpoints.clone();
+        if let Some(r) = &self.random_steps {
+            all.extend(r.schedule(self.duration, self.seed));
+        }
+        all.sort_by(|a, b| a.t.partial_cmp(&b.t).unwrap_or(std::cmp::Ordering::Equal));
+        all
+    }
+
+    /// The same scenario serialised as TOML (for reports and reproducibility).
+    pub fn to_toml(&self) -> String {
+        toml::to_string(self).unwrap_or_default()
+    }
+}
+
+fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+fn path_error<E: std::fmt::Display>(e: serde_path_to_error::Error<E>) -> ConfigError {
+    let path = e.path().to_string();
+    let path = if path == "." { String::new() } else { path };
+    let msg = one_line(&e.inner().to_string());
+    // toml/serde_json put the offending key in the message; drop their location suffixes.
+    let msg = msg
+        .split(" at line ")
+        .next()
+        .unwrap_or(&msg)
+        .trim_start_matches("TOML parse error ")
+        .to_string();
+    ConfigError::new(path, msg)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unknown_key_and_bad_values_name_the_field() {
+        let e = Scenario::from_toml("[payload]\nmasss = 0.2\n").unwrap_err();
+        assert!(e.field.starts_with("payload"), "{e}");
+        assert!(e.to_string().contains("masss"), "{e}");
+        let e = Scenario::from_toml("[payload]\nmass = -0.2\n").unwrap_err();
+        assert_eq!(e.field, "payload.mass");
+        let e = Scenario::from_toml("[payload]\nlength = 0.0\n").unwrap_err();
+        assert_eq!(e.field, "payload.length");
+        let e = Scenario::from_toml("duration = nan\n").unwrap_err();
+        assert_eq!(e.field, "duration");
+        let e = Scenario::from_json(r#"{"vehicle": {"inertia": [1, 2]}}"#).unwrap_err();
+        assert!(e.field.starts_with("vehicle.inertia"), "{e}");
+        let e = Scenario::from_toml("[[setpoints]]\nt = 1\nvn = 1\npn = 2\n").unwrap_err();
+        assert_eq!(e.field, "setpoints[0].vn");
+    }
+
+    #[test]
+    fn random_steps_follow_table_4_1_and_the_seed() {
+        let sc = Scenario::default_training();
+        let a = sc.schedule();
+        let b = sc.schedule();
+        assert_eq!(a, b);
+        let steps: Vec<_> = a.iter().filter(|e| e.t > 0.0).collect();
+        assert!(steps.len() >= 10);
+        for w in steps.windows(2) {
+            let dt = w[1].t - w[0].t;
+            assert!((10.0..=25.0).contains(&dt), "{dt}");
+        }
+        for e in &steps {
+            let v = e.vn.unwrap();
+            assert!((0.0..=3.0).contains(&v));
+        }
+        let mut other = sc.clone();
+        other.seed = 1;
+        assert_ne!(other.schedule(), a);
+    }
+
+    #[test]
+    fn round_trip_through_toml() {
+        let sc = Scenario::default_step();
+        let back = Scenario::from_toml(&sc.to_toml()).unwrap();
+        assert_eq!(back, sc);
+    }
+}

@@ -1,0 +1,338 @@
+//! Physics checks of the plant and the closed loop against closed forms and invariants
+//! (issue 2, items 5 (i)–(vii)).
+
+use nalgebra::{Quaternion, Vector3};
+use swing_core::control::px4::AxisSetpoint;
+use swing_core::plant::dynamics::swing_angles;
+use swing_core::plant::{
+    Effects, Model, PayloadKind, PayloadParams, PlantState, StepInput, VehicleParams, GRAVITY,
+};
+use swing_core::sim::{Scenario, SetpointEntry, Simulator};
+
+const IDEAL: Effects = Effects {
+    drag: false,
+    friction: false,
+    rotors: false,
+};
+
+fn payload(m: f64, l: f64) -> PayloadParams {
+    PayloadParams {
+        kind: PayloadKind::Single,
+        mass: m,
+        length: l,
+        drag: 0.0,
+        friction: 0.0,
+        ..Default::default()
+    }
+}
+
+/// Constant thrust equal to the total weight, straight up, no rotation.
+fn weight_compensation(model: &Model) -> StepInput {
+    StepInput {
+        external_force: Vector3::new(0.0, 0.0, -model.total_mass() * GRAVITY),
+        ..Default::default()
+    }
+}
+
+/// Times of upward zero crossings of `x` sampled every `h` (linear interpolation).
+fn up_crossings(x: &[f64], h: f64) -> Vec<f64> {
+    let mut out = Vec::new();
+    for k in 1..x.len() {
+        if x[k - 1] < 0.0 && x[k] >= 0.0 {
+            let frac = -x[k - 1] / (x[k] - x[k - 1]);
+            out.push((k as f64 - 1.0 + frac) * h);
+        }
+    }
+    out
+}
+
+fn mean_period(crossings: &[f64]) -> f64 {
+    (crossings[crossings.len() - 1] - crossings[0]) / (crossings.len() - 1) as f64
+}
+
+#[test]
+fn i_free_swing_frequency_matches_the_free_floating_pendulum() {
+    let mq = VehicleParams::default().mass;
+    for (mp, l) in [(0.1, 0.5), (0.2, 1.0), (0.3, 2.0)] {
+        let model = Model::new(VehicleParams::default(), payload(mp, l));
+        let u = weight_compensation(&model);
+        let mut s = PlantState::at_rest(Vector3::zeros(), 0.0, 0.01, 0.0);
+        let h = 1e-3;
+        let mut swing = Vec::new();
+        for _ in 0..30_000 {
+            swing.push(swing_angles(&s.n[0], &s.ndot[0])[0]);
+            s = model.rk4(&s, &u, h, IDEAL);
+        }
+        let period = mean_period(&up_crossings(&swing, h));
+        let omega = 2.0 * std::f64::consts::PI / period;
+        let expected = (GRAVITY / l * (mq + mp) / mq).sqrt();
+        let rel = (omega - expected).abs() / expected;
+        assert!(
+            rel < 0.01,
+            "m_p {mp} l {l}: ω {omega} vs {expected} ({rel:e})"
+        );
+        // The pinned pendulum is clearly different, so the test discriminates.
+        let pinned = (GRAVITY / l).sqrt();
+        assert!((omega - pinned).abs() / pinned > 0.04);
+    }
+}
+
+#[test]
+fn ii_energy_is_conserved_and_the_cable_keeps_its_length() {
+    for kind in [PayloadKind::Single, PayloadKind::Double] {
+        let mut p = payload(0.2, 1.0);
+        p.kind = kind;
+        p.mass2 = 0.15;
+        p.length2 = 0.4;
+        let model = Model::new(VehicleParams::default(), p.clone());
+        let u = weight_compensation(&model);
+        let mut s = PlantState::at_rest(Vector3::new(0.0, 0.0, -10.0), 0.0, 0.5, -0.3);
+        s.vel = Vector3::new(0.3, -0.2, 0.1);
+        s.n[1] = Vector3::new(0.4, 0.1, 1.0).normalize();
+        let e0 = model.energy(&s, &u.external_force);
+        let h = 1e-3;
+        let mut worst_len: f64 = 0.0;
+        let mut worst_e: f64 = 0.0;
+        for _ in 0..60_000 {
+            s = model.rk4(&s, &u, h, IDEAL);
+            let r = s.payload_position(&p, 0) - s.pos;
+            worst_len = worst_len.max((r.norm() - p.length).abs());
+            let e = model.energy(&s, &u.external_force);
+            worst_e = worst_e.max(((e - e0) / e0).abs());
+        }
+        assert!(
+            worst_e <= 1e-6,
+            "{kind:?}: relative energy drift {worst_e:e}"
+        );
+        assert!(
+            worst_len <= 1e-12,
+            "{kind:?}: cable length error {worst_len:e}"
+        );
+    }
+}
+
+#[test]
+fn ii_energy_falls_when_friction_and_drag_are_on() {
+    let mut p = payload(0.2, 1.0);
+    p.friction = 0.01;
+    p.drag = 0.01;
+    let model = Model::new(VehicleParams::default(), p);
+    let u = weight_compensation(&model);
+    let mut s = PlantState::at_rest(Vector3::zeros(), 0.0, 0.5, 0.0);
+    let e0 = model.energy(&s, &u.external_force);
+    let fx = Effects {
+        rotors: false,
+        ..Effects::default()
+    };
+    let mut prev = e0;
+    for _ in 0..5_000 {
+        s = model.rk4(&s, &u, 1e-3, fx);
+        let e = model.energy(&s, &u.external_force);
+        assert!(e <= prev + 1e-9, "energy rose with dissipation on");
+        prev = e;
+    }
+    assert!(prev < e0 - 1e-3);
+}
+
+fn run_double(h: f64, t_end: f64) -> PlantState {
+    let mut p = payload(0.2, 1.0);
+    p.kind = PayloadKind::Double;
+    p.mass2 = 0.15;
+    p.length2 = 0.4;
+    let model = Model::new(VehicleParams::default(), p);
+    let u = weight_compensation(&model);
+    let mut s = PlantState::at_rest(Vector3::zeros(), 0.0, 0.6, 0.2);
+    s.n[1] = Vector3::new(-0.5, 0.3, 1.0).normalize();
+    let n = (t_end / h).round() as usize;
+    for _ in 0..n {
+        s = model.rk4(&s, &u, h, IDEAL);
+    }
+    s
+}
+
+fn state_error(a: &PlantState, b: &PlantState) -> f64 {
+    (a.pos - b.pos).norm()
+        + (a.vel - b.vel).norm()
+        + (a.n[0] - b.n[0]).norm()
+        + (a.n[1] - b.n[1]).norm()
+        + (a.ndot[0] - b.ndot[0]).norm()
+        + (a.ndot[1] - b.ndot[1]).norm()
+}
+
+#[test]
+fn iii_rk4_global_error_falls_sixteenfold_when_the_step_halves() {
+    let t_end = 2.0;
+    let reference = run_double(0.25e-3, t_end);
+    let e1 = state_error(&run_double(8e-3, t_end), &reference);
+    let e2 = state_error(&run_double(4e-3, t_end), &reference);
+    let e3 = state_error(&run_double(2e-3, t_end), &reference);
+    for (coarse, fine) in [(e1, e2), (e2, e3)] {
+        let ratio = coarse / fine;
+        assert!(
+            (12.0..=20.0).contains(&ratio),
+            "ratio {ratio} ({coarse:e} / {fine:e})"
+        );
+    }
+}
+
+#[test]
+fn iv_quaternion_stays_unit() {
+    // The attitude derivative is tangent to the unit sphere for any body rate …
+    let q = Quaternion::new(0.8, 0.1, -0.3, 0.5).normalize();
+    let model = Model::new(VehicleParams::default(), payload(0.2, 1.0));
+    let mut s = PlantState::at_rest(Vector3::zeros(), 2.5, 0.0, 0.0);
+    s.att = q;
+    s.rate = Vector3::new(3.0, -2.0, 5.0);
+    let d = model.derivative(&s, &StepInput::default(), Effects::default());
+    assert!(q.dot(&d.att).abs() < 1e-15);
+    // … and the norm holds to round-off through an aggressive closed-loop flight.
+    let mut sc = Scenario::default_step();
+    sc.setpoints.push(SetpointEntry {
+        t: 4.0,
+        vn: Some(-3.0),
+        ve: Some(3.0),
+        yaw: Some(1.5),
+        ..Default::default()
+    });
+    sc.duration = 10.0;
+    let mut sim = Simulator::new(sc).unwrap();
+    for _ in 0..1000 {
+        sim.advance(0.01).unwrap();
+        assert!((sim.state().att.norm() - 1.0).abs() < 1e-12);
+    }
+}
+
+fn hold_error(kind: PayloadKind) -> (f64, f64) {
+    let mut sc = Scenario {
+        duration: 40.0,
+        ..Default::default()
+    };
+    sc.payload.kind = kind;
+    sc.payload.initial_swing_n = 0.1;
+    sc.setpoints = vec![SetpointEntry {
+        t: 0.0,
+        pn: Some(1.0),
+        pe: Some(-1.0),
+        pd: Some(-11.0),
+        ..Default::default()
+    }];
+    let mut sim = Simulator::new(sc).unwrap();
+    sim.run_to_end().unwrap();
+    let s = sim.state();
+    let err = (s.pos - Vector3::new(1.0, -1.0, -11.0)).norm();
+    (err, s.vel.norm())
+}
+
+#[test]
+fn v_hover_holds_position_without_steady_state_error() {
+    for kind in [PayloadKind::None, PayloadKind::Single] {
+        let (err, speed) = hold_error(kind);
+        assert!(err < 5e-3, "{kind:?}: position error {err}");
+        assert!(speed < 5e-3, "{kind:?}: residual speed {speed}");
+    }
+}
+
+#[test]
+fn vi_swing_period_under_px4_lies_between_free_and_pinned() {
+    let sc = Scenario {
+        duration: 40.0,
+        ..Scenario::default_step()
+    };
+    let (mp, l, mq) = (sc.payload.mass, sc.payload.length, sc.vehicle.mass);
+    let trace = Simulator::run(sc).unwrap();
+    let t = trace.column("t").unwrap();
+    let sw = trace.column("swing_n").unwrap();
+    let dt = t[1] - t[0];
+    // The swing after the step settles around a small drag angle; take the oscillation.
+    let start = (12.0 / dt) as usize;
+    let tail = &sw[start..];
+    let mean = tail.iter().sum::<f64>() / tail.len() as f64;
+    let centred: Vec<f64> = tail.iter().map(|x| x - mean).collect();
+    let crossings = up_crossings(&centred, dt);
+    assert!(crossings.len() >= 5, "swing did not oscillate");
+    let period = mean_period(&crossings);
+    let free = 2.0 * std::f64::consts::PI / (GRAVITY / l * (mq + mp) / mq).sqrt();
+    let pinned = 2.0 * std::f64::consts::PI * (l / GRAVITY).sqrt();
+    assert!(
+        period > free && period < pinned,
+        "period {period} outside ({free}, {pinned})"
+    );
+    // And the step did make it swing.
+    let peak = sw.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    assert!(peak > 0.05, "peak swing {peak}");
+}
+
+#[test]
+fn vii_linearisation_around_hover_matches_the_white_box_model() {
+    let (mp, l, c) = (0.25, 1.3, 0.004);
+    let vehicle = VehicleParams::default();
+    let mq = vehicle.mass;
+    let mut p = payload(mp, l);
+    p.friction = c;
+    let model = Model::new(vehicle, p);
+    let fx = Effects {
+        drag: false,
+        friction: true,
+        rotors: false,
+    };
+    // f(θ, θ̇, a_N) → (v̇_N, θ̈) with the vehicle pushed by m_Q a_N North.
+    let f = |theta: f64, theta_dot: f64, a_n: f64| -> [f64; 2] {
+        let mut s = PlantState::at_rest(Vector3::zeros(), 0.0, theta, 0.0);
+        s.ndot[0] = Vector3::new(theta.cos(), 0.0, -theta.sin()) * theta_dot;
+        let u = StepInput {
+            external_force: Vector3::new(mq * a_n, 0.0, -model.total_mass() * GRAVITY),
+            ..Default::default()
+        };
+        let d = model.derivative(&s, &u, fx);
+        let n = s.n[0];
+        let nd = s.ndot[0];
+        let ndd = d.ndot[0];
+        // θ = atan2(n_x, n_z) ⇒ θ̈ from n, ṅ, n̈.
+        let r = n.x * n.x + n.z * n.z;
+        let num = nd.x * n.z - n.x * nd.z;
+        let num_dot = ndd.x * n.z - n.x * ndd.z;
+        let r_dot = 2.0 * (n.x * nd.x + n.z * nd.z);
+        [d.vel.x, (num_dot * r - num * r_dot) / (r * r)]
+    };
+    let eps = 1e-6;
+    let jac = |k: usize| -> [f64; 2] {
+        let mut a = [0.0; 3];
+        let mut b = [0.0; 3];
+        a[k] = eps;
+        b[k] = -eps;
+        let fa = f(a[0], a[1], a[2]);
+        let fb = f(b[0], b[1], b[2]);
+        [(fa[0] - fb[0]) / (2.0 * eps), (fa[1] - fb[1]) / (2.0 * eps)]
+    };
+    let (d_theta, d_rate, d_acc) = (jac(0), jac(1), jac(2));
+    // Eq. 5.7 with the stable sign (DESIGN §3), 5.8.
+    let expected = [
+        (d_theta[0], GRAVITY * mp / mq),
+        (d_theta[1], -GRAVITY * (mq + mp) / (l * mq)),
+        (d_rate[0], c / (l * mq)),
+        (d_rate[1], -c * (mq + mp) / (l * l * mq * mp)),
+        (d_acc[0], 1.0),
+        (d_acc[1], -1.0 / l),
+    ];
+    for (i, (got, want)) in expected.iter().enumerate() {
+        assert!(
+            (got - want).abs() <= 1e-6 * want.abs().max(1.0),
+            "entry {i}: {got} vs {want}"
+        );
+    }
+}
+
+#[test]
+fn acceleration_setpoint_axis_bypasses_the_velocity_pid() {
+    let sc = Scenario {
+        duration: 6.0,
+        ..Default::default()
+    };
+    let mut sim = Simulator::new(sc).unwrap();
+    sim.set_setpoint(0, AxisSetpoint::Acceleration(0.5));
+    sim.advance(4.0).unwrap();
+    assert!((sim.cascade().acc_sp.x - 0.5).abs() < 1e-12);
+    // Total system accelerates at about 0.5·(m_Q+m_p)/(m_Q+m_p) m/s² North.
+    let v = sim.state().vel.x;
+    assert!(v > 1.2 && v < 2.4, "v_N after 4 s: {v}");
+}
