@@ -5,9 +5,15 @@
 //! * s⁻ the previous swing angle of each axis, only when q = 1 (otherwise the previous swing
 //!   is already in the second frame of z), so that the swing rate is an output by backward
 //!   difference, ṡ_k = (s_k − s_{k−1})/T_s (eq. 5.26–5.27);
-//! * d the input disturbance of each axis (eq. 5.32–5.33), entering the velocity row of the
-//!   newest frame as T_s·d (d in m/s², an unmodelled acceleration: wind, drag, IMU offset)
-//!   and constant in the model (d⁺ = d).
+//! * d the constant disturbances (d⁺ = d) of eq. 5.32–5.33, in one of three layouts
+//!   ([`DisturbanceModel`]): `velocity` — the seed's B_ud: one per axis on the velocity row
+//!   of the newest frame, entering as T_s·d (d in m/s²); `input` — one per axis entering
+//!   exactly like the input, through B (d in m/s²: thrust/IMU offset, wind force on the
+//!   vehicle); `state` — one per physical state of the newest frame, entering as T_s·d.
+//!   Offset-free tracking needs the disturbances to explain every steady model mismatch
+//!   (Pannocchia & Rawlings 2003: as many disturbances as measured outputs). The lower
+//!   delay frames are exact shifts, so `state` meets that for any constant disturbance;
+//!   `velocity` and `input` only for disturbances of their own shape.
 //!
 //! So ξ⁺ = 𝒜 ξ + ℬ u + c̃ with c̃ = [c − Bū; 0; 0]. Outputs per axis y = [v, ṡ, s] = 𝒞 ξ.
 //!
@@ -27,8 +33,22 @@
 //! the precomputed linear law U* = −H⁻¹f = K_ξ ξ₀ + K_r r + K_u u_prev + k₀.
 
 use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
 
 use crate::control::ControlError;
+
+/// Where the estimated constant disturbances enter the prediction model (module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DisturbanceModel {
+    /// One per axis on the velocity row (the seed's B_ud, eq. 5.33) [m/s²].
+    Velocity,
+    /// One per axis through the input matrix B [m/s²].
+    Input,
+    /// One per physical state of the newest frame [state units per second].
+    #[default]
+    State,
+}
 
 /// The disturbance-augmented model of the MPC (see module docs).
 #[derive(Clone, Debug)]
@@ -43,13 +63,16 @@ pub struct Augmented {
     pub cy: DMatrix<f64>,
     /// Number of measured entries (z and s⁻): ξ[0..nm].
     pub nm: usize,
+    /// Number of disturbance states: ξ[nm..nm + nd].
+    pub nd: usize,
     /// Number of inputs / axes.
     pub m: usize,
 }
 
 impl Augmented {
     /// Build from the identified model. `iv`, `is` are the indices of each axis' velocity
-    /// and swing in the newest frame; `prev_swing` where s_{k−1} of each axis sits in ξ.
+    /// and swing in the newest frame of the `n` physical states.
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         a: &DMatrix<f64>,
         b: &DMatrix<f64>,
@@ -60,20 +83,33 @@ impl Augmented {
         iv: &[usize],
         is: &[usize],
         dt: f64,
+        disturbance: DisturbanceModel,
     ) -> Self {
         let nz = a.nrows();
         let m = b.ncols();
         let extra = if delays == 1 { m } else { 0 };
         let nm = nz + extra;
-        let nx = nm + m;
+        let nd = match disturbance {
+            DisturbanceModel::Velocity | DisturbanceModel::Input => m,
+            DisturbanceModel::State => n,
+        };
+        let nx = nm + nd;
         let mut aa = DMatrix::<f64>::zeros(nx, nx);
         aa.view_mut((0, 0), (nz, nz)).copy_from(a);
-        for i in 0..m {
-            if extra > 0 {
+        if extra > 0 {
+            for i in 0..m {
                 aa[(nz + i, is[i])] = 1.0;
             }
-            aa[(iv[i], nm + i)] = dt;
-            aa[(nm + i, nm + i)] = 1.0;
+        }
+        for j in 0..nd {
+            match disturbance {
+                DisturbanceModel::Velocity => aa[(iv[j], nm + j)] = dt,
+                DisturbanceModel::Input => {
+                    aa.view_mut((0, nm + j), (nz, 1)).copy_from(&b.column(j));
+                }
+                DisturbanceModel::State => aa[(j, nm + j)] = dt,
+            }
+            aa[(nm + j, nm + j)] = 1.0;
         }
         let mut bb = DMatrix::<f64>::zeros(nx, m);
         bb.view_mut((0, 0), (nz, m)).copy_from(b);
@@ -94,11 +130,12 @@ impl Augmented {
             c: cc,
             cy,
             nm,
+            nd,
             m,
         }
     }
 
-    /// State dimension nx = nm + m.
+    /// State dimension nx = nm + nd.
     pub fn nx(&self) -> usize {
         self.a.nrows()
     }
@@ -146,7 +183,7 @@ pub struct Condensed {
     pub k0: DVector<f64>,
 }
 
-/// Steady-state target maps: u_ss = S_ur r + S_ud d + s_u0, s_ss likewise.
+/// Steady-state target maps: u_ss = S_ur r + S_ud d + s_u0, s_ss likewise (d: nd entries).
 #[derive(Clone, Debug)]
 struct Targets {
     u_r: DMatrix<f64>,
@@ -170,13 +207,14 @@ fn targets(aug: &Augmented, iv: &[usize], is: &[usize]) -> Result<Targets, Contr
         lhs[(nm + i, iv[i])] = 1.0;
     }
     let lu = lhs.lu();
-    // Right-hand sides: columns for r (m), d (m) and the constant.
-    let mut rhs = DMatrix::<f64>::zeros(dim, 2 * m + 1);
+    // Right-hand sides: columns for r (m), d (nd) and the constant.
+    let nd = aug.nd;
+    let mut rhs = DMatrix::<f64>::zeros(dim, m + nd + 1);
     for i in 0..m {
         rhs[(nm + i, i)] = 1.0;
     }
-    rhs.view_mut((0, m), (nm, m)).copy_from(&aug.a.view((0, nm), (nm, m)));
-    rhs.view_mut((0, 2 * m), (nm, 1)).copy_from(&aug.c.rows(0, nm));
+    rhs.view_mut((0, m), (nm, nd)).copy_from(&aug.a.view((0, nm), (nm, nd)));
+    rhs.view_mut((0, m + nd), (nm, 1)).copy_from(&aug.c.rows(0, nm));
     let sol = lu.solve(&rhs).ok_or_else(|| {
         ControlError::Model(
             "no steady state with v = v_ref (the model has a zero at z = 1); \
@@ -193,18 +231,20 @@ fn targets(aug: &Augmented, iv: &[usize], is: &[usize]) -> Result<Targets, Contr
     }
     let mut t = Targets {
         u_r: sol.view((nm, 0), (m, m)).into_owned(),
-        u_d: sol.view((nm, m), (m, m)).into_owned(),
-        u_0: sol.view((nm, 2 * m), (m, 1)).column(0).into_owned(),
+        u_d: sol.view((nm, m), (m, nd)).into_owned(),
+        u_0: sol.view((nm, m + nd), (m, 1)).column(0).into_owned(),
         s_r: DMatrix::zeros(m, m),
-        s_d: DMatrix::zeros(m, m),
+        s_d: DMatrix::zeros(m, nd),
         s_0: DVector::zeros(m),
     };
     for i in 0..m {
         for j in 0..m {
             t.s_r[(i, j)] = sol[(is[i], j)];
+        }
+        for j in 0..nd {
             t.s_d[(i, j)] = sol[(is[i], m + j)];
         }
-        t.s_0[i] = sol[(is[i], 2 * m)];
+        t.s_0[i] = sol[(is[i], m + nd)];
     }
     Ok(t)
 }
@@ -335,7 +375,7 @@ pub fn condense(
         }
         f_r -= &g_s * &t.s_r + &g_u * &t.u_r;
         let fd = &g_s * &t.s_d + &g_u * &t.u_d;
-        let mut cols = f_xi.columns_mut(nm, m);
+        let mut cols = f_xi.columns_mut(nm, aug.nd);
         cols -= &fd;
         f_0 -= &g_s * &t.s_0 + &g_u * &t.u_0;
     }

@@ -21,6 +21,7 @@ use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use self::active_set::ActiveSetQp;
+pub use self::condense::DisturbanceModel;
 use self::condense::{condense, Augmented, Condensed, Weights};
 use self::estimator::SteadyStateKalman;
 use self::qp::{Bounds, ClarabelQp};
@@ -65,7 +66,11 @@ pub struct MpcSettings {
     pub jerk_max: Option<f64>,
     /// Kalman process noise std of the model state per tick [state units: m/s, rad].
     pub kf_process_noise: f64,
-    /// Kalman process noise std of the input disturbance per tick [m/s²].
+    /// Where the estimated disturbances enter: `state` (default, offset-free for any
+    /// constant disturbance), `velocity` (the seed's eq. 5.33) or `input`.
+    pub disturbance: DisturbanceModel,
+    /// Kalman process noise std of each disturbance per tick [m/s² for velocity/input;
+    /// state units per second for state].
     pub kf_disturbance_noise: f64,
     /// Kalman measurement noise std [state units: m/s, rad].
     pub kf_measurement_noise: f64,
@@ -86,6 +91,7 @@ impl Default for MpcSettings {
             acc_max: Some(4.0),
             jerk_max: None,
             kf_process_noise: 0.01,
+            disturbance: DisturbanceModel::State,
             kf_disturbance_noise: 0.02,
             kf_measurement_noise: 0.01,
             solver: QpSolverKind::ActiveSet,
@@ -157,8 +163,7 @@ pub struct MpcController {
     nz: usize,
     m: usize,
     sources: Vec<Source>,
-    /// Per axis: index of v, swing in the newest frame.
-    iv: Vec<usize>,
+    /// Per axis: index of the swing in the newest frame.
     is: Vec<usize>,
     aug: Augmented,
     cond: Condensed,
@@ -292,6 +297,7 @@ impl MpcController {
             &iv,
             &is,
             dt,
+            settings.disturbance,
         );
         let nm = aug.nm;
         let nx = aug.nx();
@@ -339,7 +345,6 @@ impl MpcController {
             nz,
             m,
             sources,
-            iv,
             is,
             aug,
             cond,
@@ -378,10 +383,11 @@ impl MpcController {
         &self.kf
     }
 
-    /// Estimated input disturbance per axis [m/s²] (after the last correction).
+    /// Estimated disturbances (after the last correction), in the layout of
+    /// [`MpcSettings::disturbance`].
     pub fn disturbance(&self) -> &[f64] {
         let nm = self.aug.nm;
-        &self.kf.estimate().as_slice()[nm..nm + self.m]
+        &self.kf.estimate().as_slice()[nm..nm + self.aug.nd]
     }
 
     /// The decision U (m·Nc, stage-major: u_0 of every axis, then u_1 …) of the last tick.
