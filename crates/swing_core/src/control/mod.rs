@@ -10,6 +10,12 @@ use thiserror::Error;
 
 use crate::error::{Categorized, Category};
 
+pub mod lqr;
+pub mod mpc;
+
+pub use lqr::{care, dare, LqrController, LqrSettings, PendulumParams, RiccatiSolution};
+pub use mpc::{MpcController, MpcSettings, QpSolverKind};
+
 /// Measured state of one controlled horizontal axis (North or East).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct AxisState {
