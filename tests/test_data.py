@@ -221,3 +221,50 @@ def test_ulog_without_local_position(tmp_path):
 def test_missing_file():
     with pytest.raises(DataError, match="no such file"):
         load_flight("/nonexistent/flight.parquet")
+
+
+def _commands_available(*names: str) -> bool:
+    import importlib
+
+    for n in names:
+        try:
+            importlib.import_module(f"swingrt.commands.{n}")
+        except ImportError:
+            return False
+    import swingrt
+
+    return hasattr(swingrt, "Simulator")
+
+
+@pytest.mark.skipif(
+    not _commands_available("collect", "identify", "evaluate"),
+    reason="needs the simulator and the collect/identify/evaluate commands",
+)
+def test_identify_from_ulog_matches_parquet(tmp_path):  # pragma: no cover - until they land
+    """A simulated training flight written as ULog identifies a model as good as from the
+    trace itself (held-out NMAE on another seed's flight)."""
+    import json
+    import subprocess
+    import sys
+
+    def swingrt(*args: str) -> str:
+        res = subprocess.run(
+            [sys.executable, "-m", "swingrt", *args], capture_output=True, text=True, timeout=300
+        )
+        assert res.returncode == 0, res.stderr
+        return res.stdout
+
+    train, test = tmp_path / "train.parquet", tmp_path / "test.parquet"
+    swingrt("collect", "--seed", "1", "-o", str(train))
+    swingrt("collect", "--seed", "2", "-o", str(test))
+    ulg = tmp_path / "train.ulg"
+    write_ulog(load_flight(train), ulg)
+    scores = {}
+    for src in (train, ulg):
+        model = tmp_path / f"{src.suffix[1:]}.json"
+        swingrt("identify", str(src), "--method", "dmdc", "-o", str(model))
+        scores[src.suffix] = json.loads(swingrt("evaluate", str(model), str(test), "--json"))[
+            "nmae"
+        ]
+    assert scores[".ulg"] < 0.05
+    assert scores[".ulg"] < 1.5 * scores[".parquet"] + 0.005

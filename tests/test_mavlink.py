@@ -376,6 +376,12 @@ def test_garbage_unknown_messages_and_wrong_system_do_not_crash(vehicle):
     assert "ignored COMMAND_LONG for system 42" in out
     assert "ignored SET_POSITION_TARGET_LOCAL_NED for system 42" in out
     assert "ignored unsupported message MANUAL_CONTROL" in out
+    # SIGINT flushed the flight trace atomically (no temporary file left behind)
+    from swingrt.data import load_flight
+
+    trace = proc.args[-1]
+    assert load_flight(trace, columns=["t", "vn", "swing_n"])["t"][-1] > 2.0
+    assert [p.name for p in Path(trace).parent.iterdir() if p.suffix == ".tmp"] == []
 
 
 def test_wrong_system_id_is_detected(vehicle):
@@ -455,6 +461,28 @@ def test_overrun_hands_back_and_exits_nonzero(vehicle, tmp_path):
     obs = observer(url)
     assert current_mode(obs) == (4, 3)
     obs.close()
+
+
+def test_collect_over_mavlink_records_px4_velocity_control(vehicle, tmp_path):
+    from swingrt.data import load_flight
+    from swingrt.mavlink import collect_over_mavlink, random_step_mission
+
+    url, _ = vehicle
+    out = tmp_path / "train.parquet"
+    report = collect_over_mavlink(url, duration=6.0, seed=3, out=out)
+    assert report.aborted is None and report.ticks >= 550  # 100 Hz for 6 s
+    need = ["t", "vn", "swing_n", "acc_sp_n", "vel_sp_n", "pd"]
+    tr = load_flight(out, columns=need)
+    step = random_step_mission(6.0, 3).steps[1]
+    assert step[0] == 2.0 and 0 <= step[1] <= 3
+    t = tr["t"]
+    np.testing.assert_array_equal(tr["vel_sp_n"], np.where(t >= 2.0 - 1e-9, step[1], 0.0))
+    # acc_sp is PX4's (the double's) velocity-loop output, streamed back: 1.8 (v_sp - v)
+    late = t > 3.0
+    np.testing.assert_allclose(
+        tr["acc_sp_n"][late], 1.8 * (tr["vel_sp_n"] - tr["vn"])[late], atol=0.15
+    )
+    assert abs(tr["vn"][-1] - step[1]) < 0.3  # PX4 velocity control tracked the step
 
 
 # ----------------------------------------------------------------------------- real physics
