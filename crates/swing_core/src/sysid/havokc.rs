@@ -126,7 +126,9 @@ impl HavokcSvd {
     pub fn raw(&self, p: usize) -> Result<HavokcRaw, SysidError> {
         let p = p.min(self.numerical_rank);
         if p == 0 {
-            return Err(data("the Hankel matrix is zero: states and inputs never vary"));
+            return Err(data(
+                "the Hankel matrix is zero: states and inputs never vary",
+            ));
         }
         let w = self.v.nrows();
         let (n, m, q, r) = (self.n, self.m, self.q, self.rows());
@@ -146,11 +148,9 @@ impl HavokcSvd {
                 }
             }
         }
-        let lam_t = gram
-            .clone()
-            .lu()
-            .solve(&cross)
-            .ok_or_else(|| SysidError::Identification("V₁V₁ᵀ is singular: too little data".into()))?;
+        let lam_t = gram.clone().lu().solve(&cross).ok_or_else(|| {
+            SysidError::Identification("V₁V₁ᵀ is singular: too little data".into())
+        })?;
         let lam = lam_t.transpose();
         // M = Ũ Σ Λ Σ⁻¹ Ũᵀ, only the a-rows are needed.
         let us = DMatrix::<f64>::from_fn(r, p, |i, j| self.u[(i, j)] * self.sigma[j]);
@@ -188,7 +188,10 @@ impl HavokcSvd {
     }
 
     /// Top rows (newest-first delay form) for rank p: (A_top, B_top, c_top, forced change).
-    pub fn top(&self, p: usize) -> Result<(DMatrix<f64>, DMatrix<f64>, DVector<f64>, f64), SysidError> {
+    pub fn top(
+        &self,
+        p: usize,
+    ) -> Result<(DMatrix<f64>, DMatrix<f64>, DVector<f64>, f64), SysidError> {
         let raw = self.raw(p)?;
         let (n, m, q) = (self.n, self.m, self.q);
         let last = (q - 1) * n;
