@@ -361,7 +361,7 @@ def _load_ulog(p: Path, ulog_swing: Mapping | None) -> FlightData:
         t_sp, fsp = sp
         cols: dict[str, np.ndarray] = {}
         acc = [_first_field(fsp, f"acceleration[{i}]", f"acc_{a}") for i, a in enumerate("xyz")]
-        for c, f in zip(("acc_sp_n", "acc_sp_e", "acc_sp_d"), acc):
+        for c, f in zip(("acc_sp_n", "acc_sp_e", "acc_sp_d"), acc, strict=True):
             if f is None:
                 notes[c] = (
                     "vehicle_local_position_setpoint has neither acceleration[0..2] "
@@ -369,7 +369,7 @@ def _load_ulog(p: Path, ulog_swing: Mapping | None) -> FlightData:
                 )
             else:
                 cols[c] = fsp[f].astype(float)
-        for c, f in zip(("vel_sp_n", "vel_sp_e", "vel_sp_d"), ("vx", "vy", "vz")):
+        for c, f in zip(("vel_sp_n", "vel_sp_e", "vel_sp_d"), ("vx", "vy", "vz"), strict=True):
             if f in fsp:
                 cols[c] = fsp[f].astype(float)
             else:
@@ -443,7 +443,10 @@ def _load_ulog(p: Path, ulog_swing: Mapping | None) -> FlightData:
     t_base = t_pos[keep]
     out = FlightData(source=str(p), notes=notes)
     out["t"] = (t_base - t_base[0]) * 1e-6
-    for c, f in zip(("pn", "pe", "pd", "vn", "ve", "vd"), ("x", "y", "z", "vx", "vy", "vz")):
+    pos_fields = zip(
+        ("pn", "pe", "pd", "vn", "ve", "vd"), ("x", "y", "z", "vx", "vy", "vz"), strict=True
+    )
+    for c, f in pos_fields:
         out[c] = fpos[f][keep].astype(float)
     for t_src, cols in sources:
         for c, y in cols.items():

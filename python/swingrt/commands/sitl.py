@@ -60,7 +60,13 @@ def run(args) -> int:
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
     from swingrt.mavlink.vehicle import run_vehicle
 
-    sim = simulator(args.scenario)
+    # The vehicle is commanded over MAVLink only: a setpoint schedule in the scenario would
+    # fight the offboard node, so it is dropped (the vehicle starts holding its start point).
+    # (That is the built-in "hover" scenario: the "step" one without its schedule.)
+    scenario = swingrt.resolve_scenario(args.scenario, default="step")
+    scenario["setpoints"] = []
+    scenario["duration"] = float(args.duration) if args.duration is not None else 3600.0
+    sim = simulator(scenario)
     run_vehicle(
         sim,
         args.listen or ["udp:127.0.0.1:14540"],

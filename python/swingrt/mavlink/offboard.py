@@ -105,10 +105,8 @@ class Mission:
     def from_toml(cls, path) -> Mission:
         """``duration = S`` (optional) and ``[[step]]`` tables (or ``steps = [...]``) of
         ``{t, vn, ve}``; ``ve`` defaults to 0. Errors name the field."""
-        try:
-            import tomllib
-        except ImportError:  # Python < 3.11
-            import tomli as tomllib
+        import tomllib
+
         p = Path(path)
         try:
             doc = tomllib.loads(p.read_text(encoding="utf-8"))
@@ -556,7 +554,7 @@ class OffboardSession:
             k * self.ts, *tel.pos, *tel.vel, roll, pitch, yaw, *tel.swing, *rate,
             acc[0], acc[1], tel.acc_sp[2], ref[0], ref[1], 0.0, jitter, compute,
         )  # fmt: skip
-        for c, v in zip(NODE_COLUMNS, row):
+        for c, v in zip(NODE_COLUMNS, row, strict=True):
             cols[c][k] = v
 
 

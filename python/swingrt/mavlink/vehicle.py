@@ -108,7 +108,7 @@ def parse_setpoint(msg) -> dict[str, tuple[str, float]]:
     }
     out: dict[str, tuple[str, float]] = {}
     for axis, triple in fields.items():
-        for kind, (bit, value) in zip(("pos", "vel", "acc"), triple):
+        for kind, (bit, value) in zip(("pos", "vel", "acc"), triple, strict=True):
             if mask & TYPE_MASK[bit]:
                 continue
             if not math.isfinite(value):
@@ -499,7 +499,11 @@ def run_vehicle(
         if log_path is not None:
             from swingrt.data import write_columns
 
-            write_columns(dict(sim.trace().columns), log_path)
+            trace = sim.trace()
+            if str(log_path).lower().endswith(".parquet") and hasattr(trace, "to_parquet"):
+                trace.to_parquet(log_path)  # atomic; keeps the trace's metadata
+            else:
+                write_columns(dict(trace.columns), log_path)
             log.info("sitl: trace written to %s", log_path)
         for c in conns:
             c.close()
