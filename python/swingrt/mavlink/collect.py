@@ -16,7 +16,13 @@ import numpy as np
 
 from swingrt.errors import ConfigError
 from swingrt.mavlink.link import connect
-from swingrt.mavlink.offboard import MASK_VEL_ALT_HOLD, Mission, OffboardSession, _finish
+from swingrt.mavlink.offboard import (
+    MASK_VEL_ALT_HOLD,
+    Mission,
+    OffboardSession,
+    Watchdog,
+    _finish,
+)
 
 __all__ = ["random_step_mission", "collect_over_mavlink"]
 
@@ -67,6 +73,11 @@ def collect_over_mavlink(
     mission = random_step_mission(duration, seed, axes=axes)
     conn = connect(url)
     try:
+        # Telemetry comes at ~100 Hz: at a 10 ms loop, 3 Ts would trip on one late packet;
+        # the stale limit is at least 0.1 s (the policy is PX4's own velocity control anyway).
+        session_options.setdefault(
+            "watchdog", Watchdog(sample_time, stale_factor=max(3.0, 0.1 / sample_time))
+        )
         session = OffboardSession(conn, ts=sample_time, system_id=system_id, **session_options)
         session.connect()
 

@@ -43,6 +43,8 @@ import threading
 import time
 from dataclasses import dataclass
 
+import numpy as np
+
 from swingrt.mavlink.link import (
     PX4_MAIN_MODE,
     PX4_SUB_MODE_AUTO,
@@ -445,7 +447,10 @@ class Vehicle:
         period = dt / speed
         stop = stop or threading.Event()
         t_end = self.sim.t + duration if duration is not None else math.inf
-        start = time.perf_counter()
+        # per-tick lateness and compute time, in a preallocated ring (last hour at 100 Hz)
+        ring = np.zeros((2, 360_000))
+        t_wall = time.perf_counter()
+        start = t_wall
         k = 0
         late = 0
         while not stop.is_set() and self.sim.t < t_end - 1e-9:
@@ -453,12 +458,30 @@ class Vehicle:
             now = time.perf_counter()
             if deadline > now:
                 time.sleep(deadline - now)
+                now = time.perf_counter()
             elif now - deadline > 0.1:  # fell behind (machine stalled): re-anchor, no burst
                 late += 1
                 start = now - k * period
+                deadline = now
             self.tick(dt)
+            i = k % ring.shape[1]
+            ring[0, i] = now - deadline
+            ring[1, i] = time.perf_counter() - now
             k += 1
-        return {"ticks": k, "late": late, "wall_s": time.perf_counter() - start}
+        used = ring[:, : min(k, ring.shape[1])]
+
+        def pct(x, q):
+            return float(np.percentile(x, q)) if x.size else math.nan
+
+        return {
+            "ticks": k,
+            "late": late,
+            "wall_s": time.perf_counter() - t_wall,
+            "lateness_median_s": pct(used[0], 50),
+            "lateness_p99_s": pct(used[0], 99),
+            "tick_median_s": pct(used[1], 50),
+            "tick_p99_s": pct(used[1], 99),
+        }
 
 
 def run_vehicle(
@@ -488,10 +511,15 @@ def run_vehicle(
     try:
         stats = vehicle.run(rate_hz=rate_hz, speed=speed, duration=duration, stop=stop)
         log.info(
-            "sitl: %d ticks, %d late re-anchors, %.1f s wall",
+            "sitl: %d ticks in %.1f s wall, %d re-anchors; tick start late median %.3f ms "
+            "p99 %.3f ms; tick compute median %.3f ms p99 %.3f ms",
             stats["ticks"],
-            stats["late"],
             stats["wall_s"],
+            stats["late"],
+            stats["lateness_median_s"] * 1e3,
+            stats["lateness_p99_s"] * 1e3,
+            stats["tick_median_s"] * 1e3,
+            stats["tick_p99_s"] * 1e3,
         )
     finally:
         for sig, handler in previous.items():
