@@ -6,6 +6,7 @@ import struct
 
 import numpy as np
 import pytest
+
 from swingrt.data import (
     TRACE_COLUMNS,
     euler_to_quat,

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from swingrt.errors import LinkError
 from swingrt.mavlink import link
 from swingrt.mavlink.link import (
