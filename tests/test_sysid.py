@@ -12,7 +12,6 @@ import math
 
 import numpy as np
 import pytest
-
 import swingrt
 from swingrt import _core, sysid
 from swingrt.errors import ConfigError, DataError, IdentificationError, ModelError
@@ -66,8 +65,11 @@ def _pendulum_flight(seconds=200.0, seed=0, mp=0.2, length=1.0, offset=0.1):
         acc = 1.8 * (vref - s[0])
         rows.append((s[0], s[2]))
         us.append(acc + offset)
+
         # RK4 of the continuous model under a held input.
-        f = lambda z: a @ z + b * acc  # noqa: E731
+        def f(z, acc=acc):
+            return a @ z + b * acc
+
         k1 = f(s)
         k2 = f(s + 0.5 * dt * k1)
         k3 = f(s + 0.5 * dt * k2)
@@ -190,11 +192,20 @@ def test_fft_recovers_frequency_and_length():
 def test_nmae_hand_computed():
     text = json.dumps(
         {
-            "format": "swingrt-model/1", "method": "dmdc", "dt": 1.0, "delays": 1, "rank": 2,
-            "states": ["vn"], "inputs": ["acc_sp_n"], "offset": "none", "input_mean": [0.0],
-            "A": [[0.5]], "B": [[1.0]], "c": [0.0],
+            "format": "swingrt-model/1",
+            "method": "dmdc",
+            "dt": 1.0,
+            "delays": 1,
+            "rank": 2,
+            "states": ["vn"],
+            "inputs": ["acc_sp_n"],
+            "offset": "none",
+            "input_mean": [0.0],
+            "A": [[0.5]],
+            "B": [[1.0]],
+            "c": [0.0],
         }
-    )  # fmt: skip
+    )
     model = sysid.LinearModel.from_json(text)
     data = {
         "t": np.arange(5.0),
@@ -232,8 +243,21 @@ def test_json_round_trip_save_load(tmp_path):
     m.save(path)
     d = json.loads(path.read_text())
     assert d["format"] == "swingrt-model/1"
-    for key in ("method", "dt", "delays", "rank", "states", "inputs", "offset", "input_mean",
-                "A", "B", "c", "fingerprint", "diagnostics"):  # fmt: skip
+    for key in (
+        "method",
+        "dt",
+        "delays",
+        "rank",
+        "states",
+        "inputs",
+        "offset",
+        "input_mean",
+        "A",
+        "B",
+        "c",
+        "fingerprint",
+        "diagnostics",
+    ):
         assert key in d
     assert d["fingerprint"].startswith("fnv1a64:")
     assert d["diagnostics"]["singular_values"]
@@ -275,7 +299,11 @@ def test_bad_model_json_is_model_error(mutate, needle):
 
 def test_model_json_nan_rejected():
     cols, _, _ = _linear_flight(seed=2)
-    text = sysid.identify(cols, delays=1).to_json().replace('"A": [\n    [\n      ', '"A": [[1e999, ', 1)
+    text = (
+        sysid.identify(cols, delays=1)
+        .to_json()
+        .replace('"A": [\n    [\n      ', '"A": [[1e999, ', 1)
+    )
     with pytest.raises(ModelError):
         sysid.LinearModel.from_json(text)
 
@@ -421,8 +449,7 @@ def test_sim_models_predict_another_flight(mass, length):
 
 def test_sim_double_pendulum_dmdc_beats_whitebox():
     _need_sim()
-    cfg = {"payload": {"kind": "double", "mass": 0.2, "length": 1.0, "mass2": 0.1,
-                       "length2": 0.3}}  # fmt: skip
+    cfg = {"payload": {"kind": "double", "mass": 0.2, "length": 1.0, "mass2": 0.1, "length2": 0.3}}
     train = swingrt.collect(cfg, duration=200.0, seed=3)
     test = swingrt.collect(cfg, duration=100.0, seed=4)
     dmdc = sysid.identify(train, search=True)
@@ -435,8 +462,19 @@ def test_sim_double_pendulum_dmdc_beats_whitebox():
 @pytest.mark.parametrize("mass, length", [(0.1, 0.5), (0.2, 1.0), (0.3, 2.0)])
 def test_sim_fft_length_on_free_swing(mass, length):
     _need_sim()
-    sp = {"t": 0.0, "pn": None, "pe": None, "pd": -10.0, "vn": None, "ve": None, "vd": None,
-          "an": 0.0, "ae": 0.0, "ad": None, "yaw": None}  # fmt: skip
+    sp = {
+        "t": 0.0,
+        "pn": None,
+        "pe": None,
+        "pd": -10.0,
+        "vn": None,
+        "ve": None,
+        "vd": None,
+        "an": 0.0,
+        "ae": 0.0,
+        "ad": None,
+        "yaw": None,
+    }
     cfg = {
         "payload": {"mass": mass, "length": length, "initial_swing_n": 0.1},
         "setpoints": [sp],

@@ -352,7 +352,7 @@ def search(
             "delays": q,
             "rank": p,
             "nmae": nm,
-            "per_state": dict(zip(states, per)),
+            "per_state": {name: per[i] for i, name in enumerate(states)},
             "stable": stable,
             "spectral_radius": rho,
         }
@@ -420,9 +420,20 @@ def identify(
     (xtr, utr), (xte, ute) = _split(x, u, test_span, dt)
     if method == "whitebox":
         text = _whitebox(
-            data, xtr, utr, states, inputs, dt, offset, payload_mass, cable_length,
-            vehicle_mass, friction, swing_band, test_span,
-        )  # fmt: skip
+            data,
+            xtr,
+            utr,
+            states,
+            inputs,
+            dt,
+            offset,
+            payload_mass,
+            cable_length,
+            vehicle_mass,
+            friction,
+            swing_band,
+            test_span,
+        )
     else:
         q = 20 if delays is None else delays
         if not isinstance(q, int) or q < 1:
@@ -460,9 +471,20 @@ def _with_diagnostics(model: LinearModel, **items: Any) -> LinearModel:
 
 
 def _whitebox(
-    data, xtr, utr, states, inputs, dt, offset, payload_mass, cable_length,
-    vehicle_mass, friction, swing_band, test_span,
-) -> str:  # fmt: skip
+    data,
+    xtr,
+    utr,
+    states,
+    inputs,
+    dt,
+    offset,
+    payload_mass,
+    cable_length,
+    vehicle_mass,
+    friction,
+    swing_band,
+    test_span,
+) -> str:
     axes = len(inputs)
     if payload_mass is None:
         payload_mass = estimate_payload_mass(data, vehicle_mass=vehicle_mass, skip=test_span)
@@ -528,7 +550,7 @@ def _score(model: LinearModel, x, u, horizon: float, starts: int) -> dict[str, A
         horizon=h,
         starts=starts,
     )
-    return {"nmae": mean, "per_state": dict(zip(model.states, per))}
+    return {"nmae": mean, "per_state": {s: per[i] for i, s in enumerate(model.states)}}
 
 
 def evaluate(
@@ -580,18 +602,34 @@ def sweep_training_length(
         sub = {k: np.asarray(v)[keep] for k, v in cols.items() if np.shape(v) == t.shape}
         try:
             res = search(
-                sub, method=method, axes=axes, offset=offset, dt=dt, test_span=test_span,
-                delays=delays, fine=fine, smooth=smooth,
-            )  # fmt: skip
+                sub,
+                method=method,
+                axes=axes,
+                offset=offset,
+                dt=dt,
+                test_span=test_span,
+                delays=delays,
+                fine=fine,
+                smooth=smooth,
+            )
             sel = res.model.diagnostics["selected"]
             rows.append(
-                {"train_length": float(length), "delays": sel["delays"], "rank": sel["rank"],
-                 "nmae": sel["nmae"]}  # fmt: skip
+                {
+                    "train_length": float(length),
+                    "delays": sel["delays"],
+                    "rank": sel["rank"],
+                    "nmae": sel["nmae"],
+                }
             )
         except (DataError, _identification_error()) as exc:
             rows.append(
-                {"train_length": float(length), "delays": None, "rank": None,
-                 "nmae": math.inf, "error": str(exc)}  # fmt: skip
+                {
+                    "train_length": float(length),
+                    "delays": None,
+                    "rank": None,
+                    "nmae": math.inf,
+                    "error": str(exc),
+                }
             )
     return rows
 
@@ -617,9 +655,15 @@ def sweep_sample_time(
     rows = []
     for dt in dts:
         res = search(
-            data, method=method, axes=axes, offset=offset, dt=float(dt),
-            test_span=test_span, delays=delays, fine=None,
-        )  # fmt: skip
+            data,
+            method=method,
+            axes=axes,
+            offset=offset,
+            dt=float(dt),
+            test_span=test_span,
+            delays=delays,
+            fine=None,
+        )
         sel = res.model.diagnostics["selected"]
         rows.append(
             {"dt": float(dt), "delays": sel["delays"], "rank": sel["rank"], "nmae": sel["nmae"]}

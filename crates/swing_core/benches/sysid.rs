@@ -30,11 +30,14 @@ impl Rng {
 
 /// (x time-major [v, swing], u) for `seconds` of flight.
 fn flight(seconds: f64, seed: u64) -> (Vec<f64>, Vec<f64>) {
-    let params = WhiteboxParams { friction: 0.002, ..Default::default() };
+    let params = WhiteboxParams {
+        friction: 0.002,
+        ..Default::default()
+    };
     let (ad, bd) = params.discrete(DT);
     let mut rng = Rng(seed);
     let steps = (seconds / DT) as usize;
-    let mut s = nalgebra::Vector3::zeros();
+    let mut s = nalgebra::Vector3::<f64>::zeros();
     let (mut vref, mut next_change) = (0.0, 0usize);
     let (mut x, mut u) = (Vec::with_capacity(2 * steps), Vec::with_capacity(steps));
     for k in 0..steps {
@@ -54,7 +57,12 @@ fn flight(seconds: f64, seed: u64) -> (Vec<f64>, Vec<f64>) {
 fn bench(c: &mut Criterion) {
     let (x, u) = flight(120.0, 1);
     let traj = Trajectory::new(&x, 2, &u, 1).unwrap();
-    let settings = DmdcSettings { delays: 50, rank: Some(40), offset: Offset::Mean, dt: DT };
+    let settings = DmdcSettings {
+        delays: 50,
+        rank: Some(40),
+        offset: Offset::Mean,
+        dt: DT,
+    };
     c.bench_function("dmdc_fit_q50_120s", |b| {
         b.iter(|| dmdc::fit(black_box(&traj), &settings).unwrap())
     });
@@ -64,7 +72,11 @@ fn bench(c: &mut Criterion) {
     let split = (40.0 / DT) as usize;
     let (test, train) = (all.slice(0, split), all.slice(split, all.len));
     let grid = Grid::reference();
-    let count: usize = grid.delays.iter().map(|q| grid.ranks(*q, 2, 1, usize::MAX).len()).sum();
+    let count: usize = grid
+        .delays
+        .iter()
+        .map(|q| grid.ranks(*q, 2, 1, usize::MAX).len())
+        .sum();
     assert_eq!(count, 366);
     let search = SearchSettings {
         offset: Offset::Mean,

@@ -64,10 +64,19 @@ fn dmdc_recovers_random_stable_system_at_full_rank() {
     let traj = Trajectory::new(&x, n, &u, m).unwrap();
     let model = dmdc::fit(
         &traj,
-        &DmdcSettings { delays: 1, rank: None, offset: Offset::None, dt: 0.1 },
+        &DmdcSettings {
+            delays: 1,
+            rank: None,
+            offset: Offset::None,
+            dt: 0.1,
+        },
     )
     .unwrap();
-    assert!(max_abs_diff(&model.a, &a) < 1e-10, "A error {}", max_abs_diff(&model.a, &a));
+    assert!(
+        max_abs_diff(&model.a, &a) < 1e-10,
+        "A error {}",
+        max_abs_diff(&model.a, &a)
+    );
     assert!(max_abs_diff(&model.b, &b) < 1e-10);
     assert_eq!(model.rank, n + m);
     assert!(model.diagnostics.fit_nmae.unwrap() < 1e-10);
@@ -84,7 +93,12 @@ fn dmdc_affine_recovers_constant_term() {
     let traj = Trajectory::new(&x, n, &u, m).unwrap();
     let model = dmdc::fit(
         &traj,
-        &DmdcSettings { delays: 1, rank: None, offset: Offset::Affine, dt: 0.1 },
+        &DmdcSettings {
+            delays: 1,
+            rank: None,
+            offset: Offset::Affine,
+            dt: 0.1,
+        },
     )
     .unwrap();
     assert!(max_abs_diff(&model.a, &a) < 1e-10);
@@ -110,7 +124,12 @@ fn dmdc_rank_r_system_recovered_at_p_equal_r() {
     let traj = Trajectory::new(&xs, 4, &us, 1).unwrap();
     let model = dmdc::fit(
         &traj,
-        &DmdcSettings { delays: 1, rank: Some(3), offset: Offset::None, dt: 0.1 },
+        &DmdcSettings {
+            delays: 1,
+            rank: Some(3),
+            offset: Offset::None,
+            dt: 0.1,
+        },
     )
     .unwrap();
     let sv = &model.diagnostics.singular_values;
@@ -159,7 +178,12 @@ fn dmdc_with_delays_matches_delay_system_exactly() {
     let traj = Trajectory::new(&x, 2, &u, 1).unwrap();
     let model = dmdc::fit(
         &traj,
-        &DmdcSettings { delays: 3, rank: None, offset: Offset::None, dt: 0.03 },
+        &DmdcSettings {
+            delays: 3,
+            rank: None,
+            offset: Offset::None,
+            dt: 0.03,
+        },
     )
     .unwrap();
     // Lower rows are the exact shift.
@@ -198,7 +222,13 @@ fn search_picks_true_delay_count() {
         .fold(f64::INFINITY, f64::min);
     assert!(q3 < 1e-8, "q = 3 should be exact, got {q3}");
     for c in res.table.iter().filter(|c| c.delays < 3) {
-        assert!(c.nmae > 1e-5, "q = {} p = {} scored {}", c.delays, c.rank, c.nmae);
+        assert!(
+            c.nmae > 1e-5,
+            "q = {} p = {} scored {}",
+            c.delays,
+            c.rank,
+            c.nmae
+        );
     }
     assert!(best.delays >= 3 && best.nmae < 1e-8);
     // Selecting the most parsimonious near-exact candidate gives the true q.
@@ -225,10 +255,17 @@ fn search_screens_unstable_candidates_and_coarse_to_fine_runs() {
         rank_extra: 1,
         rank_window: None,
     };
-    let res = coarse_to_fine(&train, &test, &coarse, 1, 1, &SearchSettings {
-        horizon: 200,
-        ..SearchSettings::default()
-    })
+    let res = coarse_to_fine(
+        &train,
+        &test,
+        &coarse,
+        1,
+        1,
+        &SearchSettings {
+            horizon: 200,
+            ..SearchSettings::default()
+        },
+    )
     .unwrap();
     let best = &res.table[res.best];
     assert_eq!(best.stable, Some(true));
@@ -253,7 +290,12 @@ fn havokc_forced_entries_and_exact_reproduction() {
     }
     let model = havokc::fit(
         &traj,
-        &HavokcSettings { delays: 4, rank: None, offset: Offset::None, dt: 0.03 },
+        &HavokcSettings {
+            delays: 4,
+            rank: None,
+            offset: Offset::None,
+            dt: 0.03,
+        },
     )
     .unwrap();
     assert!(model.has_shift_structure());
@@ -270,10 +312,19 @@ fn havokc_reproduces_random_linear_system() {
     let traj = Trajectory::new(&x, 3, &u, 1).unwrap();
     let model = havokc::fit(
         &traj,
-        &HavokcSettings { delays: 1, rank: None, offset: Offset::None, dt: 0.1 },
+        &HavokcSettings {
+            delays: 1,
+            rank: None,
+            offset: Offset::None,
+            dt: 0.1,
+        },
     )
     .unwrap();
-    assert!(max_abs_diff(&model.a, &a) < 1e-8, "{}", max_abs_diff(&model.a, &a));
+    assert!(
+        max_abs_diff(&model.a, &a) < 1e-8,
+        "{}",
+        max_abs_diff(&model.a, &a)
+    );
     assert!(max_abs_diff(&model.b, &b) < 1e-8);
 }
 
@@ -305,14 +356,22 @@ fn rls_recovers_total_mass() {
     let mut rng = Rng(5);
     let m = 1.252;
     let acc: Vec<f64> = (0..2000).map(|_| 0.5 * rng.next()).collect();
-    let thrust: Vec<f64> = acc.iter().map(|a| m * (9.81 - a) + 0.05 * rng.next()).collect();
+    let thrust: Vec<f64> = acc
+        .iter()
+        .map(|a| m * (9.81 - a) + 0.05 * rng.next())
+        .collect();
     let est = whitebox::rls_mass(&thrust, &acc, 9.81, 1.0, 1.0).unwrap();
     assert!((est.last().unwrap() - m).abs() < 2e-3);
 }
 
 #[test]
 fn whitebox_delay_form_is_exact_for_the_three_state_model() {
-    let params = WhiteboxParams { payload_mass: 0.3, length: 0.8, friction: 0.01, ..Default::default() };
+    let params = WhiteboxParams {
+        payload_mass: 0.3,
+        length: 0.8,
+        friction: 0.01,
+        ..Default::default()
+    };
     let dt = 0.03;
     let (ad, bd) = params.discrete(dt);
     let model = whitebox::model(&params, 1, dt, None).unwrap();
@@ -335,7 +394,10 @@ fn whitebox_delay_form_is_exact_for_the_three_state_model() {
     // sit on the imaginary axis; the discrete model's spectral radius is ≤ 1.
     assert!(model.spectral_radius().unwrap() <= 1.0 + 1e-9);
     // Swing frequency of the continuous model equals eq. 4.8 (frictionless).
-    let p0 = WhiteboxParams { friction: 0.0, ..params.clone() };
+    let p0 = WhiteboxParams {
+        friction: 0.0,
+        ..params.clone()
+    };
     let (a, _) = p0.continuous();
     let w2 = -a[(1, 2)];
     let expect = 9.81 / 0.8 * (0.952 + 0.3) / 0.952;
@@ -391,7 +453,12 @@ fn json_round_trip() {
     let traj = Trajectory::new(&x, 2, &u, 1).unwrap();
     let mut model = dmdc::fit(
         &traj,
-        &DmdcSettings { delays: 3, rank: Some(5), offset: Offset::Affine, dt: 0.03 },
+        &DmdcSettings {
+            delays: 3,
+            rank: Some(5),
+            offset: Offset::Affine,
+            dt: 0.03,
+        },
     )
     .unwrap();
     model.states = vec!["vn".into(), "swing_n".into()];
@@ -411,9 +478,15 @@ fn malformed_model_json_names_the_problem() {
         (base.replace("[[0.5]]", "[[0.5, 1.0]]"), "A row 0"),
         (base.replace("\"c\":[0.0]", "\"c\":[]"), "c has 0"),
         (base.replace("swingrt-model/1", "other/2"), "format"),
-        (base.replace("\"offset\":\"none\"", "\"offset\":\"odd\""), "invalid model JSON"),
+        (
+            base.replace("\"offset\":\"none\"", "\"offset\":\"odd\""),
+            "invalid model JSON",
+        ),
         (base.replace("\"dt\":0.03", "\"dt\":-1"), "dt"),
-        (base.replace("\"rank\":2", "\"rank\":2,\"extra\":1"), "unknown field"),
+        (
+            base.replace("\"rank\":2", "\"rank\":2,\"extra\":1"),
+            "unknown field",
+        ),
     ];
     for (text, needle) in cases {
         let err = LinearModel::from_json(&text).unwrap_err();
@@ -431,13 +504,34 @@ fn bad_inputs_give_errors() {
     assert!(e.to_string().contains("sample 1"), "{e}");
     let (x, u) = delay_system(50, 1);
     let traj = Trajectory::new(&x, 2, &u, 1).unwrap();
-    let e = dmdc::fit(&traj, &DmdcSettings { delays: 40, ..Default::default() }).unwrap_err();
+    let e = dmdc::fit(
+        &traj,
+        &DmdcSettings {
+            delays: 40,
+            ..Default::default()
+        },
+    )
+    .unwrap_err();
     assert_eq!(e.category(), Category::Data);
     assert!(e.to_string().contains("too few"), "{e}");
-    let e = dmdc::fit(&traj, &DmdcSettings { delays: 2, rank: Some(99), ..Default::default() })
-        .unwrap_err();
+    let e = dmdc::fit(
+        &traj,
+        &DmdcSettings {
+            delays: 2,
+            rank: Some(99),
+            ..Default::default()
+        },
+    )
+    .unwrap_err();
     assert_eq!(e.category(), Category::Config);
-    let e = dmdc::fit(&traj, &DmdcSettings { delays: 0, ..Default::default() }).unwrap_err();
+    let e = dmdc::fit(
+        &traj,
+        &DmdcSettings {
+            delays: 0,
+            ..Default::default()
+        },
+    )
+    .unwrap_err();
     assert_eq!(e.category(), Category::Config);
     assert!(Trajectory::new(&[1.0, 2.0, 3.0], 2, &[0.0], 1).is_err());
 }
@@ -457,15 +551,32 @@ fn search_without_stable_candidate_is_an_identification_error() {
     let xs: Vec<f64> = x.iter().flat_map(|v| [*v, 2.0 * v]).collect();
     let traj = Trajectory::new(&xs, 2, &u, 1).unwrap();
     let (test, train) = (traj.slice(0, 400), traj.slice(400, len));
-    let grid = Grid { delays: vec![1, 2], rank_start: 1, rank_step: 1, rank_extra: 0, rank_window: None };
-    let e = grid_search(&train, &test, &grid, &SearchSettings { horizon: 100, offset: Offset::None, ..Default::default() })
-        .unwrap_err();
+    let grid = Grid {
+        delays: vec![1, 2],
+        rank_start: 1,
+        rank_step: 1,
+        rank_extra: 0,
+        rank_window: None,
+    };
+    let e = grid_search(
+        &train,
+        &test,
+        &grid,
+        &SearchSettings {
+            horizon: 100,
+            offset: Offset::None,
+            ..Default::default()
+        },
+    )
+    .unwrap_err();
     assert_eq!(e.category(), Category::Identification);
 }
 
 #[test]
 fn smoothers_preserve_what_they_should() {
-    let quad: Vec<f64> = (0..50).map(|k| 0.3 + 0.1 * k as f64 - 0.002 * (k * k) as f64).collect();
+    let quad: Vec<f64> = (0..50)
+        .map(|k| 0.3 + 0.1 * k as f64 - 0.002 * (k * k) as f64)
+        .collect();
     let s = smooth::quadratic(&quad, 20).unwrap();
     for (a, b) in s.iter().zip(&quad) {
         assert!((a - b).abs() < 1e-9);

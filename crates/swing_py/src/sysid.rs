@@ -23,9 +23,9 @@ fn data_err(msg: impl Into<String>) -> PyErr {
 
 /// Borrow a 2-D float64 C-contiguous array, or raise `DataError` naming it.
 fn array2<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<PyReadonlyArray2<'py, f64>> {
-    let arr: PyReadonlyArray2<'py, f64> = obj.extract().map_err(|_| {
-        data_err(format!("{name} must be a 2-D numpy array of float64"))
-    })?;
+    let arr: PyReadonlyArray2<'py, f64> = obj
+        .extract()
+        .map_err(|_| data_err(format!("{name} must be a 2-D numpy array of float64")))?;
     // as_slice also accepts Fortran order, which would scramble the time-major layout.
     if !arr.is_c_contiguous() {
         return Err(data_err(format!("{name} must be C-contiguous")));
@@ -97,8 +97,24 @@ fn sysid_fit(
         .detach(|| {
             let traj = Trajectory::new(xs, n, us, m)?;
             match method.as_str() {
-                "dmdc" => dmdc::fit(&traj, &DmdcSettings { delays, rank, offset, dt }),
-                "havokc" => havokc::fit(&traj, &HavokcSettings { delays, rank, offset, dt }),
+                "dmdc" => dmdc::fit(
+                    &traj,
+                    &DmdcSettings {
+                        delays,
+                        rank,
+                        offset,
+                        dt,
+                    },
+                ),
+                "havokc" => havokc::fit(
+                    &traj,
+                    &HavokcSettings {
+                        delays,
+                        rank,
+                        offset,
+                        dt,
+                    },
+                ),
                 other => Err(SysidError::Config(format!(
                     "method must be dmdc or havokc, not {other:?}"
                 ))),
@@ -165,7 +181,12 @@ fn sysid_search<'py>(
     };
     let (n, m) = (cols(&xa), cols(&ua));
     let (n2, m2) = (cols(&xb), cols(&ub));
-    let (s1, s2, s3, s4) = (xa.as_slice()?, ua.as_slice()?, xb.as_slice()?, ub.as_slice()?);
+    let (s1, s2, s3, s4) = (
+        xa.as_slice()?,
+        ua.as_slice()?,
+        xb.as_slice()?,
+        ub.as_slice()?,
+    );
     let res = py
         .detach(|| {
             let train = Trajectory::new(s1, n, s2, m)?;
@@ -178,7 +199,14 @@ fn sysid_search<'py>(
         .map_err(to_py)?;
     let rows = PyList::empty(py);
     for c in &res.table {
-        rows.append((c.delays, c.rank, c.nmae, c.per_state.clone(), c.stable, c.spectral_radius))?;
+        rows.append((
+            c.delays,
+            c.rank,
+            c.nmae,
+            c.per_state.clone(),
+            c.stable,
+            c.spectral_radius,
+        ))?;
     }
     let json = named(res.model, states, inputs)?.to_json().map_err(to_py)?;
     Ok((json, rows, res.best))
@@ -261,18 +289,27 @@ fn sysid_whitebox(
     u: Option<&Bound<'_, PyAny>>,
     offset: &str,
 ) -> PyResult<String> {
-    let params = WhiteboxParams { vehicle_mass, payload_mass, length, friction, gravity };
+    let params = WhiteboxParams {
+        vehicle_mass,
+        payload_mass,
+        length,
+        friction,
+        gravity,
+    };
     let axes = inputs.len();
     let model = whitebox::model(&params, axes, dt, frequency_hz).map_err(to_py)?;
     let mut model = named(model, states, inputs)?;
     let offset = parse_offset(offset)?;
     if let (Some(x), Some(u)) = (x, u) {
         let (xa, ua) = (array2(x, "x")?, array2(u, "u")?);
-        let traj = Trajectory::new(xa.as_slice()?, cols(&xa), ua.as_slice()?, cols(&ua))
-            .map_err(to_py)?;
+        let traj =
+            Trajectory::new(xa.as_slice()?, cols(&xa), ua.as_slice()?, cols(&ua)).map_err(to_py)?;
         whitebox::apply_offset(&mut model, &traj, offset).map_err(to_py)?;
     } else if offset != Offset::None {
-        return Err(raise(Category::Config, "offset mean/affine needs training data x, u"));
+        return Err(raise(
+            Category::Config,
+            "offset mean/affine needs training data x, u",
+        ));
     }
     model.to_json().map_err(to_py)
 }
@@ -301,7 +338,10 @@ fn sysid_rls_mass<'py>(
     forgetting: f64,
     initial: f64,
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-    let (t, a) = (array1(thrust_vertical, "thrust")?, array1(acc_down, "acc_down")?);
+    let (t, a) = (
+        array1(thrust_vertical, "thrust")?,
+        array1(acc_down, "acc_down")?,
+    );
     let out = whitebox::rls_mass(t.as_slice()?, a.as_slice()?, gravity, forgetting, initial)
         .map_err(to_py)?;
     Ok(PyArray1::from_vec(py, out))

@@ -158,9 +158,8 @@ impl DmdcBasis {
                 t[(s, i)] = acc;
             }
         }
-        let tol = sigma.first().copied().unwrap_or(0.0)
-            * f64::EPSILON
-            * (self.samples.max(rq) as f64);
+        let tol =
+            sigma.first().copied().unwrap_or(0.0) * f64::EPSILON * (self.samples.max(rq) as f64);
         let numerical_rank = sigma.iter().take_while(|s| **s > tol).count();
         Ok(DmdcSvd {
             features,
@@ -266,11 +265,17 @@ pub fn fit(traj: &Trajectory<'_>, settings: &DmdcSettings) -> Result<LinearModel
     if p == 0 || p > full {
         return Err(config(format!(
             "rank {p} outside 1..={full} (n·q + m{} for q = {q})",
-            if settings.offset == Offset::Affine { " + 1" } else { "" }
+            if settings.offset == Offset::Affine {
+                " + 1"
+            } else {
+                ""
+            }
         )));
     }
     if svd.numerical_rank == 0 {
-        return Err(data("the data matrix is zero: states and inputs never vary"));
+        return Err(data(
+            "the data matrix is zero: states and inputs never vary",
+        ));
     }
     let g = svd.g(p);
     let (a_top, b_top, c_top) = split_g(&g, &svd.features);

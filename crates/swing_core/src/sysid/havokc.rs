@@ -25,6 +25,9 @@ use super::hankel::Trajectory;
 use super::metrics::one_step_nmae;
 use super::model::{LinearModel, Offset};
 
+/// Dense top rows of a delay-form model: (A_top, B_top, c_top, largest forced change).
+pub type TopRows = (DMatrix<f64>, DMatrix<f64>, DVector<f64>, f64);
+
 /// Settings of one HAVOKc fit.
 #[derive(Clone, Debug, PartialEq)]
 pub struct HavokcSettings {
@@ -126,7 +129,9 @@ impl HavokcSvd {
     pub fn raw(&self, p: usize) -> Result<HavokcRaw, SysidError> {
         let p = p.min(self.numerical_rank);
         if p == 0 {
-            return Err(data("the Hankel matrix is zero: states and inputs never vary"));
+            return Err(data(
+                "the Hankel matrix is zero: states and inputs never vary",
+            ));
         }
         let w = self.v.nrows();
         let (n, m, q, r) = (self.n, self.m, self.q, self.rows());
@@ -146,11 +151,9 @@ impl HavokcSvd {
                 }
             }
         }
-        let lam_t = gram
-            .clone()
-            .lu()
-            .solve(&cross)
-            .ok_or_else(|| SysidError::Identification("V₁V₁ᵀ is singular: too little data".into()))?;
+        let lam_t = gram.clone().lu().solve(&cross).ok_or_else(|| {
+            SysidError::Identification("V₁V₁ᵀ is singular: too little data".into())
+        })?;
         let lam = lam_t.transpose();
         // M = Ũ Σ Λ Σ⁻¹ Ũᵀ, only the a-rows are needed.
         let us = DMatrix::<f64>::from_fn(r, p, |i, j| self.u[(i, j)] * self.sigma[j]);
@@ -188,7 +191,7 @@ impl HavokcSvd {
     }
 
     /// Top rows (newest-first delay form) for rank p: (A_top, B_top, c_top, forced change).
-    pub fn top(&self, p: usize) -> Result<(DMatrix<f64>, DMatrix<f64>, DVector<f64>, f64), SysidError> {
+    pub fn top(&self, p: usize) -> Result<TopRows, SysidError> {
         let raw = self.raw(p)?;
         let (n, m, q) = (self.n, self.m, self.q);
         let last = (q - 1) * n;

@@ -36,7 +36,9 @@ pub fn start_points(
         return Err(super::error::config("at least one start point is needed"));
     }
     if horizon == 0 {
-        return Err(super::error::config("the horizon must be at least one step"));
+        return Err(super::error::config(
+            "the horizon must be at least one step",
+        ));
     }
     let lo = q.max(1) - 1;
     if len < lo + horizon + 1 {
@@ -111,7 +113,14 @@ impl DelayRows {
         let c = (0..n)
             .map(|i| c_top[i] - (0..m).map(|j| b_top[(i, j)] * input_mean[j]).sum::<f64>())
             .collect();
-        Self { n, m, q, a_rev, b, c }
+        Self {
+            n,
+            m,
+            q,
+            a_rev,
+            b,
+            c,
+        }
     }
 
     /// From a model whose lower rows are the delay shift; `None` otherwise.
@@ -181,7 +190,7 @@ impl<'a> Scorer<'a> {
         let mut inv_range = Vec::with_capacity(n);
         for i in 0..n {
             let r = hi[i] - lo[i];
-            if !(r > 0.0) {
+            if r.is_nan() || r <= 0.0 {
                 return Err(data(format!(
                     "state {i} is constant over the test data: its range is zero, NMAE is undefined"
                 )));
@@ -213,7 +222,9 @@ impl<'a> Scorer<'a> {
             )));
         }
         if let Some(s) = self.starts.iter().find(|s| **s + 1 < q) {
-            return Err(data(format!("start {s} has fewer than {q} samples of history")));
+            return Err(data(format!(
+                "start {s} has fewer than {q} samples of history"
+            )));
         }
         self.buf.resize((q + h) * n, 0.0);
         let mut per_state = vec![0.0; n];
@@ -229,7 +240,7 @@ impl<'a> Scorer<'a> {
                 let truth = self.traj.state(s + k + 1);
                 for i in 0..n {
                     let e = (pred[i] - truth[i]).abs();
-                    if !(e * self.inv_range[i] <= limit) {
+                    if e.is_nan() || e * self.inv_range[i] > limit {
                         per_state.iter_mut().for_each(|v| *v = f64::INFINITY);
                         break 'starts;
                     }
@@ -266,14 +277,17 @@ impl<'a> Scorer<'a> {
         let mut per_state = vec![0.0; n];
         for &s in &self.starts {
             if s + 1 < q {
-                return Err(data(format!("start {s} has fewer than {q} samples of history")));
+                return Err(data(format!(
+                    "start {s} has fewer than {q} samples of history"
+                )));
             }
             let hist = &self.traj.x[(s + 1 - q) * n..(s + 1) * n];
             let pred = model.predict(hist, &self.traj.u[s * model.m()..(s + h) * model.m()])?;
             for k in 0..h {
                 let truth = self.traj.state(s + k + 1);
                 for i in 0..n {
-                    per_state[i] += (pred[k * n + i] - truth[i]).abs() * self.inv_range[i] / h as f64;
+                    per_state[i] +=
+                        (pred[k * n + i] - truth[i]).abs() * self.inv_range[i] / h as f64;
                 }
             }
         }
@@ -299,7 +313,9 @@ pub fn rollout_nmae(
 pub fn one_step_nmae(model: &LinearModel, traj: &Trajectory<'_>) -> Result<f64, SysidError> {
     let (n, q) = (model.n(), model.delays);
     let Some(rows) = DelayRows::from_model(model) else {
-        return Err(super::error::model("one-step NMAE needs the delay-shift structure"));
+        return Err(super::error::model(
+            "one-step NMAE needs the delay-shift structure",
+        ));
     };
     if traj.len < q + 1 {
         return Err(data("too few samples for a one-step score"));
@@ -309,7 +325,11 @@ pub fn one_step_nmae(model: &LinearModel, traj: &Trajectory<'_>) -> Result<f64, 
     let mut err = vec![0.0; n];
     let mut pred = vec![0.0; n];
     for k in (q - 1)..traj.len - 1 {
-        rows.step(&traj.x[(k + 1 - q) * n..(k + 1) * n], traj.input(k), &mut pred);
+        rows.step(
+            &traj.x[(k + 1 - q) * n..(k + 1) * n],
+            traj.input(k),
+            &mut pred,
+        );
         for (i, t) in traj.state(k + 1).iter().enumerate() {
             err[i] += (pred[i] - t).abs();
         }

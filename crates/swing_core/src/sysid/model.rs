@@ -150,9 +150,17 @@ fn rows_of(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
         .collect()
 }
 
-fn matrix_from(name: &str, rows: &[Vec<f64>], nr: usize, nc: usize) -> Result<DMatrix<f64>, SysidError> {
+fn matrix_from(
+    name: &str,
+    rows: &[Vec<f64>],
+    nr: usize,
+    nc: usize,
+) -> Result<DMatrix<f64>, SysidError> {
     if rows.len() != nr {
-        return Err(model(format!("{name} has {} rows, expected {nr}", rows.len())));
+        return Err(model(format!(
+            "{name} has {} rows, expected {nr}",
+            rows.len()
+        )));
     }
     for (i, r) in rows.iter().enumerate() {
         if r.len() != nc {
@@ -191,7 +199,10 @@ impl LinearModel {
             )));
         }
         if !(self.dt.is_finite() && self.dt > 0.0) {
-            return Err(model(format!("dt must be a positive number of seconds, not {}", self.dt)));
+            return Err(model(format!(
+                "dt must be a positive number of seconds, not {}",
+                self.dt
+            )));
         }
         if n == 0 {
             return Err(model("states is empty"));
@@ -218,7 +229,10 @@ impl LinearModel {
             )));
         }
         if self.c.len() != nz {
-            return Err(model(format!("c has {} entries, expected {nz}", self.c.len())));
+            return Err(model(format!(
+                "c has {} entries, expected {nz}",
+                self.c.len()
+            )));
         }
         if self.input_mean.len() != m {
             return Err(model(format!(
@@ -345,7 +359,9 @@ impl LinearModel {
             )));
         }
         if history.iter().chain(inputs).any(|v| !v.is_finite()) {
-            return Err(super::error::data("history or inputs contain a non-finite value"));
+            return Err(super::error::data(
+                "history or inputs contain a non-finite value",
+            ));
         }
         let horizon = inputs.len() / m;
         let nz = n * q;
@@ -377,8 +393,5 @@ pub fn spectral_radius(a: &DMatrix<f64>) -> Result<f64, SysidError> {
     let ev = fa
         .eigenvalues()
         .map_err(|e| model(format!("eigenvalues did not converge: {e:?}")))?;
-    Ok(ev
-        .iter()
-        .map(|z| z.re.hypot(z.im))
-        .fold(0.0_f64, f64::max))
+    Ok(ev.iter().map(|z| z.re.hypot(z.im)).fold(0.0_f64, f64::max))
 }

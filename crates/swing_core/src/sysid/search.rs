@@ -167,7 +167,9 @@ pub fn grid_search(
         return Err(config(format!("dt must be positive, not {}", settings.dt)));
     }
     if train.n != test.n || train.m != test.m {
-        return Err(super::error::data("training and test data have different columns"));
+        return Err(super::error::data(
+            "training and test data have different columns",
+        ));
     }
     let q_max = *grid.delays.iter().max().expect("non-empty");
     if grid.delays.contains(&0) {
@@ -231,7 +233,9 @@ pub fn grid_search(
             tops.push(top);
         }
         // Screen this q's candidates in ascending NMAE order until the first stable one.
-        let mut order: Vec<usize> = (first..table.len()).filter(|i| table[*i].nmae.is_finite()).collect();
+        let mut order: Vec<usize> = (first..table.len())
+            .filter(|i| table[*i].nmae.is_finite())
+            .collect();
         order.sort_by(|a, b| table[*a].nmae.total_cmp(&table[*b].nmae));
         for i in order {
             let t = &tops[i];
@@ -312,7 +316,13 @@ pub fn coarse_to_fine(
 ) -> Result<SearchResult, SysidError> {
     let first = grid_search(train, test, coarse, settings)?;
     let (q0, p0) = (first.table[first.best].delays, first.table[first.best].rank);
-    let q_hi = coarse.delays.iter().max().copied().unwrap_or(q0).max(q0 + q_radius);
+    let q_hi = coarse
+        .delays
+        .iter()
+        .max()
+        .copied()
+        .unwrap_or(q0)
+        .max(q0 + q_radius);
     let fine = Grid {
         delays: (q0.saturating_sub(q_radius).max(1)..=q_hi.min(q0 + q_radius)).collect(),
         rank_start: 1,
@@ -325,8 +335,7 @@ pub fn coarse_to_fine(
     let mut table = first.table;
     let offset = table.len();
     table.extend(second.table);
-    let (best, model) = if second.model.diagnostics.test_nmae <= first.model.diagnostics.test_nmae
-    {
+    let (best, model) = if second.model.diagnostics.test_nmae <= first.model.diagnostics.test_nmae {
         (offset + second.best, second.model)
     } else {
         (first.best, first.model)

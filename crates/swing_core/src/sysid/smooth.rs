@@ -14,7 +14,9 @@ use super::error::{config, SysidError};
 
 fn check(window: usize, len: usize) -> Result<(), SysidError> {
     if window < 3 {
-        return Err(config(format!("smoothing window must be ≥ 3 samples, not {window}")));
+        return Err(config(format!(
+            "smoothing window must be ≥ 3 samples, not {window}"
+        )));
     }
     if len < window {
         return Err(super::error::data(format!(

@@ -73,7 +73,10 @@ impl WhiteboxParams {
             }
         }
         if !(self.friction.is_finite() && self.friction >= 0.0) {
-            return Err(config(format!("friction must be ≥ 0, not {}", self.friction)));
+            return Err(config(format!(
+                "friction must be ≥ 0, not {}",
+                self.friction
+            )));
         }
         Ok(())
     }
@@ -177,12 +180,19 @@ fn fft(re: &mut [f64], im: &mut [f64]) {
 /// The mean is removed, a Hann window applied, the record zero-padded to ≥ 16× its length
 /// (power of two) and the single-sided amplitude spectrum's peak refined by a parabola
 /// through the log amplitudes of its neighbours.
-pub fn fft_peak_frequency(signal: &[f64], dt: f64, f_min: f64, f_max: f64) -> Result<f64, SysidError> {
+pub fn fft_peak_frequency(
+    signal: &[f64],
+    dt: f64,
+    f_min: f64,
+    f_max: f64,
+) -> Result<f64, SysidError> {
     if !(dt.is_finite() && dt > 0.0) {
         return Err(config(format!("dt must be positive, not {dt}")));
     }
     if !(f_min >= 0.0 && f_max > f_min) {
-        return Err(config(format!("frequency band [{f_min}, {f_max}] Hz is empty")));
+        return Err(config(format!(
+            "frequency band [{f_min}, {f_max}] Hz is empty"
+        )));
     }
     if signal.len() < 8 {
         return Err(data(format!(
@@ -214,11 +224,17 @@ pub fn fft_peak_frequency(signal: &[f64], dt: f64, f_min: f64, f_max: f64) -> Re
         .max_by(|a, b| amp(*a).total_cmp(&amp(*b)))
         .expect("non-empty band");
     if amp(kp) == 0.0 {
-        return Err(data("the swing signal is constant: no oscillation to measure"));
+        return Err(data(
+            "the swing signal is constant: no oscillation to measure",
+        ));
     }
     let (l, c, r) = (amp(kp - 1).ln(), amp(kp).ln(), amp(kp + 1).ln());
     let denom = l - 2.0 * c + r;
-    let shift = if denom.abs() > 0.0 { 0.5 * (l - r) / denom } else { 0.0 };
+    let shift = if denom.abs() > 0.0 {
+        0.5 * (l - r) / denom
+    } else {
+        0.0
+    };
     Ok((kp as f64 + shift.clamp(-0.5, 0.5)) * df)
 }
 
@@ -243,14 +259,18 @@ pub fn rls_mass(
         return Err(data("no thrust samples for the mass estimate"));
     }
     if !(forgetting > 0.0 && forgetting <= 1.0) {
-        return Err(config(format!("forgetting factor must be in (0, 1], not {forgetting}")));
+        return Err(config(format!(
+            "forgetting factor must be in (0, 1], not {forgetting}"
+        )));
     }
     let mut theta = initial;
     let mut p = 1e3;
     let mut out = Vec::with_capacity(acc_down.len());
     for (k, (t, a)) in thrust_vertical.iter().zip(acc_down).enumerate() {
         if !(t.is_finite() && a.is_finite()) {
-            return Err(data(format!("thrust or acceleration not finite at sample {k}")));
+            return Err(data(format!(
+                "thrust or acceleration not finite at sample {k}"
+            )));
         }
         let phi = gravity - a;
         let gain = p * phi / (forgetting + phi * p * phi);
@@ -278,7 +298,8 @@ pub fn axis_delay_rows(
     let mut m = Matrix4::<f64>::zeros();
     m.fixed_view_mut::<2, 3>(0, 0).copy_from(&c);
     m.fixed_view_mut::<2, 3>(2, 0).copy_from(&(c * ad_inv));
-    m.fixed_view_mut::<2, 1>(2, 3).copy_from(&(-(c * ad_inv * bd)));
+    m.fixed_view_mut::<2, 1>(2, 3)
+        .copy_from(&(-(c * ad_inv * bd)));
     let m_inv = m.try_inverse().ok_or_else(|| {
         SysidError::Identification(
             "swing rate cannot be reconstructed from two samples at this dt".into(),
@@ -349,7 +370,9 @@ pub fn apply_offset(
     offset: Offset,
 ) -> Result<(), SysidError> {
     if traj.n != model.n() || traj.m != model.m() {
-        return Err(data("training data does not match the white-box model's columns"));
+        return Err(data(
+            "training data does not match the white-box model's columns",
+        ));
     }
     model.offset = offset;
     match offset {
