@@ -379,3 +379,25 @@ pub fn one_step_nmae(model: &LinearModel, traj: &Trajectory<'_>) -> Result<f64, 
     }
     Ok(sum / n as f64)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dot_matches_naive_sum() {
+        let a: Vec<f64> = (0..11).map(|k| k as f64 * 0.5).collect();
+        let b: Vec<f64> = (0..11).map(|k| 1.0 - k as f64).collect();
+        let naive: f64 = a.iter().zip(&b).map(|(x, y)| x * y).sum();
+        assert!((dot(&a, &b) - naive).abs() < 1e-12);
+    }
+
+    #[test]
+    fn constant_state_is_a_data_error() {
+        let x = [1.0, 0.0, 1.0, 1.0, 1.0, 2.0];
+        let u = [0.0, 0.0, 0.0];
+        let traj = Trajectory::new(&x, 2, &u, 1).unwrap();
+        let err = Scorer::new(traj, vec![0], 1).err().unwrap();
+        assert!(err.to_string().contains("state 0 is constant"));
+    }
+}
