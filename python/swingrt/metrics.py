@@ -64,7 +64,8 @@ def step_metrics(
     t = _col(trace, "t")
     if axis not in ("n", "e", "ne"):
         raise DataError(f"axis must be 'n', 'e' or 'ne' (got {axis!r})")
-    swing_name = "swing_true_{}" if "swing_true_n" in (getattr(trace, "columns", trace)) else "swing_{}"
+    cols = getattr(trace, "columns", trace)
+    swing_name = "swing_true_{}" if "swing_true_n" in cols else "swing_{}"
     sn, se = _col(trace, swing_name.format("n")), _col(trace, swing_name.format("e"))
     vn, ve = _col(trace, "vn"), _col(trace, "ve")
     an, ae = _col(trace, "acc_sp_n"), _col(trace, "acc_sp_e")

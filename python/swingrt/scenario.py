@@ -12,17 +12,22 @@ import math
 import os
 import tomllib
 from pathlib import Path
-from typing import Any, Union
+from typing import Any
 
 from swingrt import _core
 from swingrt.errors import ConfigError
 
 #: What a scenario can be given as.
-ScenarioLike = Union[None, str, os.PathLike, dict]
+ScenarioLike = None | str | os.PathLike | dict
 
 
 def builtin(kind: str) -> dict[str, Any]:
-    """The built-in scenario ``step`` (for simulate) or ``training`` (for collect)."""
+    """A built-in scenario: ``step`` (simulate), ``training`` (collect) or ``hover``
+    (the step scenario without a schedule: hold the start position)."""
+    if kind == "hover":
+        sc = json.loads(_core.default_scenario("step"))
+        sc.update(name="hover", setpoints=[], duration=3600.0)
+        return sc
     return json.loads(_core.default_scenario(kind))
 
 

@@ -42,11 +42,11 @@ class Simulator:
     """Steppable closed loop of vehicle, payload, PX4 cascade and wind.
 
     ``config`` is a scenario (None, dict, TOML path or string) merged onto the built-in
-    ``step`` scenario; the schedule of the scenario still applies, and
-    :meth:`set_setpoint` overrides it per axis from then on.
+    ``hover`` scenario (hold the start position, one hour long); a schedule in the scenario
+    still applies, and :meth:`set_setpoint` overrides it per axis from then on.
     """
 
-    def __init__(self, config: ScenarioLike = None, *, default: str = "step", **overrides: Any):
+    def __init__(self, config: ScenarioLike = None, *, default: str = "hover", **overrides: Any):
         self.scenario = resolve(config, default=default, **overrides)
         import json
 

@@ -3,11 +3,30 @@
 use numpy::{IntoPyArray, PyArray1};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use swing_core::control::lqr::{LqrController, LqrSettings, PendulumParams};
+use swing_core::control::mpc::{MpcController, MpcSettings};
 use swing_core::control::px4::AxisSetpoint;
 use swing_core::sim::{Scenario, Simulator, Trace};
+use swing_core::sysid::LinearModel;
 use swing_core::ConfigError;
 
 use crate::errors::to_py;
+
+/// Parse a settings struct from JSON; unknown keys and bad values name the field.
+pub fn parse_settings<T: serde::de::DeserializeOwned>(json: &str, section: &str) -> PyResult<T> {
+    let mut de = serde_json::Deserializer::from_str(json);
+    serde_path_to_error::deserialize(&mut de).map_err(|e| {
+        let path = e.path().to_string();
+        to_py(ConfigError::new(
+            if path == "." {
+                section.to_string()
+            } else {
+                format!("{section}.{path}")
+            },
+            e.inner().to_string(),
+        ))
+    })
+}
 
 fn trace_to_dict<'py>(py: Python<'py>, trace: Trace) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
@@ -142,7 +161,10 @@ impl PySimulator {
     /// Set one axis (0 = N, 1 = E, 2 = D) to mode `pos`, `vel` or `acc` with `value` (SI).
     fn set_setpoint(&mut self, axis: usize, mode: &str, value: f64) -> PyResult<()> {
         if axis > 2 {
-            return Err(to_py(ConfigError::new("axis", "must be 0 (N), 1 (E) or 2 (D)")));
+            return Err(to_py(ConfigError::new(
+                "axis",
+                "must be 0 (N), 1 (E) or 2 (D)",
+            )));
         }
         if !value.is_finite() {
             return Err(to_py(ConfigError::new(
@@ -169,8 +191,7 @@ impl PySimulator {
     fn state<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let s = self.inner.state();
         let d = PyDict::new(py);
-        let (roll, pitch, yaw) =
-            nalgebra::UnitQuaternion::from_quaternion(s.att).euler_angles();
+        let (roll, pitch, yaw) = nalgebra::UnitQuaternion::from_quaternion(s.att).euler_angles();
         let swing = self.inner.measured_swing();
         let truth = self.inner.true_swing();
         let fc = self.inner.cascade();
@@ -222,6 +243,60 @@ impl PySimulator {
     /// Wall-clock compute time of every controller tick so far [µs].
     fn tick_times<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
         self.inner.tick_stats().tick_us.clone().into_pyarray(py)
+    }
+
+    /// Fly the MPC on an identified model (swingrt-model/1 JSON) in place of PX4's velocity
+    /// PID on the model's axes from `engage_at` [s]; `budget` [s] per tick before fallback.
+    #[pyo3(signature = (model_json, settings_json, engage_at, budget))]
+    fn attach_mpc(
+        &mut self,
+        model_json: &str,
+        settings_json: Option<&str>,
+        engage_at: f64,
+        budget: f64,
+    ) -> PyResult<()> {
+        let model = LinearModel::from_json(model_json).map_err(to_py)?;
+        let settings = match settings_json {
+            Some(t) => parse_settings::<MpcSettings>(t, "mpc")?,
+            None => MpcSettings::default(),
+        };
+        let mpc = MpcController::new(&model, settings).map_err(to_py)?;
+        self.inner
+            .attach_controller(Box::new(mpc), engage_at, budget)
+            .map_err(to_py)
+    }
+
+    /// Fly the baseline LQR (eq. 5.12–5.20) with the given white-box parameters on `axes`
+    /// axes (1 = N, 2 = N+E) from `engage_at` [s].
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (m_q, m_p, l, c, axes, settings_json, engage_at, budget))]
+    fn attach_lqr(
+        &mut self,
+        m_q: f64,
+        m_p: f64,
+        l: f64,
+        c: f64,
+        axes: usize,
+        settings_json: Option<&str>,
+        engage_at: f64,
+        budget: f64,
+    ) -> PyResult<()> {
+        let settings = match settings_json {
+            Some(t) => parse_settings::<LqrSettings>(t, "lqr")?,
+            None => LqrSettings::default(),
+        };
+        let params = PendulumParams { m_q, m_p, l, c };
+        let lqr = LqrController::new(params, axes, settings).map_err(to_py)?;
+        self.inner
+            .attach_controller(Box::new(lqr), engage_at, budget)
+            .map_err(to_py)
+    }
+
+    /// Predicted outputs of the attached controller's last tick (MPC), else None.
+    fn controller_prediction<'py>(&mut self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
+        self.inner
+            .controller_prediction()
+            .map(|v| v.into_pyarray(py))
     }
 
     /// Number of controller ticks that needed the constrained QP.

@@ -35,9 +35,12 @@ def summary_lines(trace) -> list[str]:
             return "not within the run" if math.isinf(x) else f"{x:.2f} s"
 
         lines.append(
-            f"step on {axis.upper()} at t = {t0:.2f} s: peak swing {m['peak_swing_deg']:.2f}°, "
-            f"velocity overshoot {m['overshoot_pct']:.1f} %, velocity settles {fmt(m['v_settle_s'])}, "
-            f"swing settles (±1°) {fmt(m['swing_settle_s'])}, swing IAE {m['swing_iae_deg_s']:.2f}°·s"
+            f"step on {axis.upper()} at t = {t0:.2f} s: "
+            f"peak swing {m['peak_swing_deg']:.2f}°, "
+            f"velocity overshoot {m['overshoot_pct']:.1f} %, "
+            f"velocity settles {fmt(m['v_settle_s'])}, "
+            f"swing settles (±1°) {fmt(m['swing_settle_s'])}, "
+            f"swing IAE {m['swing_iae_deg_s']:.2f}°·s"
         )
     return lines
 

@@ -10,6 +10,12 @@ use thiserror::Error;
 
 use crate::error::{Categorized, Category};
 
+pub mod lqr;
+pub mod mpc;
+
+pub use lqr::{care, dare, LqrController, LqrSettings, PendulumParams, RiccatiSolution};
+pub use mpc::{MpcController, MpcSettings, QpSolverKind};
+
 /// Measured state of one controlled horizontal axis (North or East).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct AxisState {
@@ -89,4 +95,9 @@ pub trait SwingController: Send {
         vel_ref: &[f64],
         acc_out: &mut [f64],
     ) -> Result<TickInfo, ControlError>;
+    /// Predicted outputs of the last tick for plots (MPC: Np × axes × [v, swing rate,
+    /// swing]); `None` for controllers that do not predict. Not for the real-time path.
+    fn prediction(&mut self) -> Option<Vec<f64>> {
+        None
+    }
 }

@@ -1,0 +1,568 @@
+//! Data-driven swing-damping MPC on an identified delay-coordinate model (thesis 5.4).
+//!
+//! Equations: prediction model with the delay-embedded state, backward-difference swing rate
+//! and velocity input disturbance (eq. 5.23–5.27, 5.32–5.34) in [`condense`]; cost with
+//! output, input and input-increment weights over prediction horizon Np and control horizon
+//! Nc with the input held after Nc (eq. 5.21–5.22, 5.28–5.31) condensed to a dense QP in
+//! [`condense`]; the steady-state Kalman filter of the disturbance in [`estimator`]; the
+//! bounded QP and its solvers in [`qp`] and [`active_set`].
+//!
+//! One tick: shift the measured history into the delay stack, Kalman correction, the
+//! precomputed unconstrained law U* = K_ξ ξ̂ + K_r v_ref + K_u u_prev + k₀; if U* violates a
+//! bound, solve the QP (Clarabel or the dense active set) with gradient f = −H U*; apply the
+//! first move, Kalman prediction. All work buffers are allocated at construction.
+
+pub mod active_set;
+pub mod condense;
+pub mod estimator;
+pub mod qp;
+
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+
+use self::active_set::ActiveSetQp;
+pub use self::condense::DisturbanceModel;
+use self::condense::{condense, Augmented, Condensed, Weights};
+use self::estimator::SteadyStateKalman;
+use self::qp::{Bounds, ClarabelQp};
+use super::{AxisState, ControlError, SwingController, TickInfo, TickKind};
+use crate::config::{non_negative, positive, ConfigError};
+use crate::sysid::LinearModel;
+
+/// Which QP solver handles ticks with an active bound.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum QpSolverKind {
+    /// Clarabel interior point, built once and updated in place.
+    Clarabel,
+    /// Dense Goldfarb–Idnani dual active set on the constant Cholesky factor of H.
+    #[default]
+    ActiveSet,
+}
+
+/// MPC tuning and limits. Weights multiply the error before squaring (eq. 5.29–5.31).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MpcSettings {
+    /// Prediction horizon Np [ticks of the model's dt]; should span ≥ one swing period of
+    /// the longest cable (≈ 3 s).
+    pub horizon: usize,
+    /// Control horizon Nc [ticks], 1 ≤ Nc ≤ Np; the input is held after Nc (eq. 5.22).
+    pub control_horizon: usize,
+    /// Velocity tracking weight [1/(m/s)].
+    pub w_velocity: f64,
+    /// Swing-rate weight [1/(rad/s)] (backward difference, eq. 5.27).
+    pub w_swing_rate: f64,
+    /// Swing-angle weight [1/rad] (reference: the steady-state swing; 0 = off, as the seed).
+    pub w_swing: f64,
+    /// Input weight [1/(m/s²)] around the steady-state input (0 = off).
+    pub w_acc: f64,
+    /// Input-increment weight [1/(m/s²)] per tick.
+    pub w_acc_rate: f64,
+    /// Bound on |acceleration setpoint| [m/s²] (none = unbounded).
+    pub acc_max: Option<f64>,
+    /// Bound on |acceleration setpoint change| [m/s³] (none = unbounded); per tick the
+    /// increment bound is jerk_max · dt.
+    pub jerk_max: Option<f64>,
+    /// Kalman process noise std of the model state per tick [state units: m/s, rad].
+    pub kf_process_noise: f64,
+    /// Where the estimated disturbances enter: `state` (default, offset-free for any
+    /// constant disturbance), `velocity` (the seed's eq. 5.33) or `input`.
+    pub disturbance: DisturbanceModel,
+    /// Kalman process noise std of each disturbance per tick [m/s² for velocity/input;
+    /// state units per second for state].
+    pub kf_disturbance_noise: f64,
+    /// Kalman measurement noise std [state units: m/s, rad].
+    pub kf_measurement_noise: f64,
+    /// QP solver for ticks with an active bound: `clarabel` or `active_set`.
+    pub solver: QpSolverKind,
+}
+
+impl Default for MpcSettings {
+    fn default() -> Self {
+        Self {
+            horizon: 100,
+            control_horizon: 20,
+            w_velocity: 1.0,
+            w_swing_rate: 1.0,
+            w_swing: 0.0,
+            w_acc: 0.0,
+            w_acc_rate: 1.0,
+            acc_max: Some(4.0),
+            jerk_max: None,
+            kf_process_noise: 0.01,
+            disturbance: DisturbanceModel::State,
+            kf_disturbance_noise: 0.02,
+            kf_measurement_noise: 0.01,
+            solver: QpSolverKind::ActiveSet,
+        }
+    }
+}
+
+impl MpcSettings {
+    /// Check horizons, weights and limits.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if self.horizon == 0 || self.horizon > 2000 {
+            return Err(ConfigError::new(
+                "horizon",
+                format!("must be between 1 and 2000 ticks (got {})", self.horizon),
+            ));
+        }
+        if self.control_horizon == 0 || self.control_horizon > self.horizon {
+            return Err(ConfigError::new(
+                "control_horizon",
+                format!(
+                    "must be between 1 and horizon = {} (got {})",
+                    self.horizon, self.control_horizon
+                ),
+            ));
+        }
+        non_negative("w_velocity", self.w_velocity)?;
+        non_negative("w_swing_rate", self.w_swing_rate)?;
+        non_negative("w_swing", self.w_swing)?;
+        non_negative("w_acc", self.w_acc)?;
+        non_negative("w_acc_rate", self.w_acc_rate)?;
+        if self.w_acc == 0.0 && self.w_acc_rate == 0.0 {
+            return Err(ConfigError::new(
+                "w_acc_rate",
+                "w_acc or w_acc_rate must be > 0 (the QP needs a positive definite Hessian)",
+            ));
+        }
+        if let Some(a) = self.acc_max {
+            positive("acc_max", a)?;
+        }
+        if let Some(j) = self.jerk_max {
+            positive("jerk_max", j)?;
+        }
+        positive("kf_process_noise", self.kf_process_noise)?;
+        positive("kf_disturbance_noise", self.kf_disturbance_noise)?;
+        positive("kf_measurement_noise", self.kf_measurement_noise)?;
+        Ok(())
+    }
+}
+
+/// Where a model state comes from in the measured [`AxisState`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Source {
+    V(usize),
+    Swing(usize),
+    SwingRate(usize),
+}
+
+enum Backend {
+    None,
+    Clarabel(Box<ClarabelQp>),
+    ActiveSet(Box<ActiveSetQp>),
+}
+
+/// The MPC controller (see module docs); implements [`SwingController`] at the model's dt.
+pub struct MpcController {
+    settings: MpcSettings,
+    dt: f64,
+    n: usize,
+    nz: usize,
+    m: usize,
+    sources: Vec<Source>,
+    /// Per axis: index of the swing in the newest frame.
+    is: Vec<usize>,
+    aug: Augmented,
+    cond: Condensed,
+    kf: SteadyStateKalman,
+    bounds: Bounds,
+    backend: Backend,
+    // Work buffers (allocated once).
+    y: DVector<f64>,
+    u_prev: DVector<f64>,
+    r: DVector<f64>,
+    u_unc: DVector<f64>,
+    u_sol: DVector<f64>,
+    f: DVector<f64>,
+    xi_last: DVector<f64>,
+    pred: DVector<f64>,
+    initialized: bool,
+}
+
+impl std::fmt::Debug for MpcController {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MpcController")
+            .field("settings", &self.settings)
+            .field("dt", &self.dt)
+            .field("states", &self.n)
+            .field("delays", &(self.nz / self.n))
+            .field("axes", &self.m)
+            .finish()
+    }
+}
+
+fn axis_suffix(input: &str, a: usize) -> String {
+    match input.strip_prefix("acc_sp_") {
+        Some(s) if !s.is_empty() => s.to_string(),
+        _ => ["n", "e"][a].to_string(),
+    }
+}
+
+fn check_model(model: &LinearModel) -> Result<(usize, usize, usize), ControlError> {
+    let bad = |s: String| Err(ControlError::Model(s));
+    let n = model.states.len();
+    let q = model.delays;
+    let m = model.inputs.len();
+    if n == 0 || q == 0 {
+        return bad(format!(
+            "model needs ≥ 1 state and delays ≥ 1 (got {n} states, q = {q})"
+        ));
+    }
+    if !(1..=2).contains(&m) {
+        return bad(format!("model must have 1 or 2 inputs (axes), got {m}"));
+    }
+    let nz = n * q;
+    if model.a.shape() != (nz, nz) {
+        return bad(format!(
+            "A must be {nz}×{nz} (states × delays), got {:?}",
+            model.a.shape()
+        ));
+    }
+    if model.b.shape() != (nz, m) {
+        return bad(format!("B must be {nz}×{m}, got {:?}", model.b.shape()));
+    }
+    if model.c.len() != nz {
+        return bad(format!("c must have {nz} entries, got {}", model.c.len()));
+    }
+    if model.input_mean.len() != m {
+        return bad(format!(
+            "input_mean must have {m} entries, got {}",
+            model.input_mean.len()
+        ));
+    }
+    if !(model.dt.is_finite() && model.dt > 0.0) {
+        return bad(format!("dt must be > 0 (got {})", model.dt));
+    }
+    let finite = model.a.iter().all(|x| x.is_finite())
+        && model.b.iter().all(|x| x.is_finite())
+        && model.c.iter().all(|x| x.is_finite())
+        && model.input_mean.iter().all(|x| x.is_finite());
+    if !finite {
+        return bad("model has non-finite entries".into());
+    }
+    Ok((n, q, m))
+}
+
+impl MpcController {
+    /// Build the controller: augment the model, design the Kalman filter, condense the QP
+    /// and set up the solver. All allocation happens here.
+    pub fn new(model: &LinearModel, settings: MpcSettings) -> Result<Self, ControlError> {
+        settings.validate()?;
+        let (n, q, m) = check_model(model)?;
+        let nz = n * q;
+        let dt = model.dt;
+        // Map model states onto the measured axis states.
+        let mut sources = Vec::with_capacity(n);
+        let suffixes: Vec<String> = (0..m).map(|a| axis_suffix(&model.inputs[a], a)).collect();
+        for name in &model.states {
+            let mut found = None;
+            for (a, s) in suffixes.iter().enumerate() {
+                if *name == format!("v{s}") {
+                    found = Some(Source::V(a));
+                } else if *name == format!("swing_{s}") {
+                    found = Some(Source::Swing(a));
+                } else if *name == format!("swing_rate_{s}") {
+                    found = Some(Source::SwingRate(a));
+                }
+            }
+            match found {
+                Some(src) => sources.push(src),
+                None => return Err(ControlError::Model(format!(
+                    "model state '{name}' is not one the controller measures on axes {suffixes:?} \
+                         (expected v<axis>, swing_<axis> or swing_rate_<axis>)"
+                ))),
+            }
+        }
+        let mut iv = vec![usize::MAX; m];
+        let mut is = vec![usize::MAX; m];
+        for (k, src) in sources.iter().enumerate() {
+            match *src {
+                Source::V(a) => iv[a] = k,
+                Source::Swing(a) => is[a] = k,
+                Source::SwingRate(_) => {}
+            }
+        }
+        for a in 0..m {
+            if iv[a] == usize::MAX || is[a] == usize::MAX {
+                return Err(ControlError::Model(format!(
+                    "model lacks v{0} or swing_{0} for input '{1}'",
+                    suffixes[a], model.inputs[a]
+                )));
+            }
+        }
+        let aug = Augmented::new(
+            &model.a,
+            &model.b,
+            &model.c,
+            &model.input_mean,
+            n,
+            q,
+            &iv,
+            &is,
+            dt,
+            settings.disturbance,
+        );
+        let nm = aug.nm;
+        let nx = aug.nx();
+        let weights = Weights {
+            v: settings.w_velocity,
+            swing_rate: settings.w_swing_rate,
+            swing: settings.w_swing,
+            u: settings.w_acc,
+            du: settings.w_acc_rate,
+        };
+        let cond = condense(
+            &aug,
+            &iv,
+            &is,
+            weights,
+            settings.horizon,
+            settings.control_horizon,
+        )?;
+        let mut w = DMatrix::<f64>::zeros(nx, nx);
+        for i in 0..nx {
+            w[(i, i)] = if i < nm {
+                settings.kf_process_noise.powi(2)
+            } else {
+                settings.kf_disturbance_noise.powi(2)
+            };
+        }
+        let v = DMatrix::<f64>::identity(nm, nm) * settings.kf_measurement_noise.powi(2);
+        let kf = SteadyStateKalman::new(aug.a.clone(), aug.b.clone(), aug.c.clone(), nm, &w, &v)?;
+        let bounds = Bounds {
+            u_max: settings.acc_max,
+            du_max: settings.jerk_max.map(|j| j * dt),
+        };
+        let nc = settings.control_horizon;
+        let backend = if !bounds.any() {
+            Backend::None
+        } else {
+            match settings.solver {
+                QpSolverKind::Clarabel => {
+                    Backend::Clarabel(Box::new(ClarabelQp::new(&cond.h, bounds, m, nc)?))
+                }
+                QpSolverKind::ActiveSet => {
+                    Backend::ActiveSet(Box::new(ActiveSetQp::new(&cond.h, bounds, m, nc)?))
+                }
+            }
+        };
+        let nu = m * nc;
+        let ny = 3 * m * settings.horizon;
+        Ok(Self {
+            settings,
+            dt,
+            n,
+            nz,
+            m,
+            sources,
+            is,
+            aug,
+            cond,
+            kf,
+            bounds,
+            backend,
+            y: DVector::zeros(nm),
+            u_prev: DVector::zeros(m),
+            r: DVector::zeros(m),
+            u_unc: DVector::zeros(nu),
+            u_sol: DVector::zeros(nu),
+            f: DVector::zeros(nu),
+            xi_last: DVector::zeros(nx),
+            pred: DVector::zeros(ny),
+            initialized: false,
+        })
+    }
+
+    /// The settings in use.
+    pub fn settings(&self) -> &MpcSettings {
+        &self.settings
+    }
+
+    /// The condensed problem (prediction matrices, Hessian, unconstrained gains).
+    pub fn condensed(&self) -> &Condensed {
+        &self.cond
+    }
+
+    /// The disturbance-augmented prediction model.
+    pub fn augmented(&self) -> &Augmented {
+        &self.aug
+    }
+
+    /// The steady-state Kalman filter.
+    pub fn estimator(&self) -> &SteadyStateKalman {
+        &self.kf
+    }
+
+    /// Estimated disturbances (after the last correction), in the layout of
+    /// [`MpcSettings::disturbance`].
+    pub fn disturbance(&self) -> &[f64] {
+        let nm = self.aug.nm;
+        &self.kf.estimate().as_slice()[nm..nm + self.aug.nd]
+    }
+
+    /// The decision U (m·Nc, stage-major: u_0 of every axis, then u_1 …) of the last tick.
+    pub fn predicted_inputs(&self) -> &[f64] {
+        self.u_sol.as_slice()
+    }
+
+    /// Predicted outputs of the last tick, Np steps × axes × [v [m/s], swing rate [rad/s],
+    /// swing [rad]] flattened row-major (step k+1 first), at the model's dt.
+    pub fn predicted_trajectory(&mut self) -> &[f64] {
+        self.pred.copy_from(&self.cond.y_off);
+        self.pred.gemv(1.0, &self.cond.phi, &self.xi_last, 1.0);
+        self.pred.gemv(1.0, &self.cond.gamma, &self.u_sol, 1.0);
+        self.pred.as_slice()
+    }
+
+    /// Write the newest measured frame into the delay stack (shifting older frames down).
+    fn push_frame(&mut self, state: &[AxisState]) {
+        let (n, nz) = (self.n, self.nz);
+        let ys = self.y.as_mut_slice();
+        if nz < ys.len() {
+            // q = 1: keep the previous swing of each axis for the backward difference.
+            for a in 0..self.m {
+                ys[nz + a] = ys[self.is[a]];
+            }
+        }
+        ys.copy_within(0..nz - n, n);
+        for (k, src) in self.sources.iter().enumerate() {
+            ys[k] = match *src {
+                Source::V(a) => state[a].v,
+                Source::Swing(a) => state[a].swing,
+                Source::SwingRate(a) => state[a].swing_rate,
+            };
+        }
+    }
+
+    fn check(&self, state: &[AxisState], vel_ref: &[f64], out: &[f64]) -> Result<(), ControlError> {
+        let m = self.m;
+        if state.len() != m || vel_ref.len() != m || out.len() != m {
+            return Err(ControlError::Input(format!(
+                "expected {m} axis state(s), reference(s) and output(s), got {}, {} and {}",
+                state.len(),
+                vel_ref.len(),
+                out.len()
+            )));
+        }
+        for (i, s) in state.iter().enumerate() {
+            if !(s.v.is_finite() && s.swing.is_finite() && s.swing_rate.is_finite()) {
+                return Err(ControlError::Input(format!(
+                    "axis {i} state is not finite: {s:?}"
+                )));
+            }
+        }
+        if let Some(i) = vel_ref.iter().position(|x| !x.is_finite()) {
+            return Err(ControlError::Input(format!("vel_ref[{i}] is not finite")));
+        }
+        Ok(())
+    }
+}
+
+impl SwingController for MpcController {
+    fn axes(&self) -> usize {
+        self.m
+    }
+
+    fn prediction(&mut self) -> Option<Vec<f64>> {
+        Some(self.predicted_trajectory().to_vec())
+    }
+
+    fn period(&self) -> f64 {
+        self.dt
+    }
+
+    fn reset(&mut self, state: &[AxisState], acc: &[f64]) {
+        let m = self.m;
+        let mut frame = [AxisState::default(); 2];
+        for (a, f) in frame.iter_mut().enumerate().take(m) {
+            let s = state.get(a).copied().unwrap_or_default();
+            if s.v.is_finite() && s.swing.is_finite() && s.swing_rate.is_finite() {
+                *f = s;
+            }
+        }
+        // A steady history: every frame equal to the current measurement.
+        for _ in 0..self.nz / self.n + 1 {
+            self.push_frame(&frame[..m]);
+        }
+        for a in 0..m {
+            let u = acc.get(a).copied().unwrap_or(0.0);
+            self.u_prev[a] = if u.is_finite() { u } else { 0.0 };
+        }
+        let nm = self.aug.nm;
+        self.xi_last.fill(0.0);
+        self.xi_last.rows_mut(0, nm).copy_from(&self.y);
+        self.kf.set_prior(self.xi_last.as_slice());
+        self.u_sol.fill(0.0);
+        for j in 0..self.cond.nc {
+            for a in 0..m {
+                self.u_sol[j * m + a] = self.u_prev[a];
+            }
+        }
+        self.initialized = true;
+    }
+
+    fn step(
+        &mut self,
+        state: &[AxisState],
+        vel_ref: &[f64],
+        acc_out: &mut [f64],
+    ) -> Result<TickInfo, ControlError> {
+        self.check(state, vel_ref, acc_out)?;
+        if !self.initialized {
+            let zeros = [0.0; 2];
+            self.reset(state, &zeros[..self.m]);
+        } else {
+            self.push_frame(state);
+        }
+        let xi = self.kf.correct(&self.y);
+        self.xi_last.copy_from(xi);
+        self.r.copy_from_slice(vel_ref);
+        // Unconstrained law.
+        let c = &self.cond;
+        self.u_unc.copy_from(&c.k0);
+        self.u_unc.gemv(1.0, &c.k_xi, &self.xi_last, 1.0);
+        self.u_unc.gemv(1.0, &c.k_r, &self.r, 1.0);
+        self.u_unc.gemv(1.0, &c.k_u, &self.u_prev, 1.0);
+        let mut info = TickInfo::default();
+        let needs_qp = self.bounds.any()
+            && self
+                .bounds
+                .violated(self.u_unc.as_slice(), self.u_prev.as_slice(), 1e-9);
+        if needs_qp {
+            // f = −H U* (U* minimises ½UᵀHU + fᵀU).
+            self.f.gemv(-1.0, &c.h, &self.u_unc, 0.0);
+            let iters = match &mut self.backend {
+                Backend::None => 0,
+                Backend::Clarabel(qp) => qp.solve(
+                    self.f.as_slice(),
+                    self.u_prev.as_slice(),
+                    self.u_sol.as_mut_slice(),
+                )?,
+                Backend::ActiveSet(qp) => qp.solve(
+                    self.f.as_slice(),
+                    self.u_unc.as_slice(),
+                    self.u_prev.as_slice(),
+                    self.u_sol.as_mut_slice(),
+                )?,
+            };
+            info.kind = TickKind::Constrained;
+            info.iterations = iters;
+        } else {
+            self.u_sol.copy_from(&self.u_unc);
+        }
+        let m = self.m;
+        for a in 0..m {
+            let u = self.u_sol[a];
+            if !u.is_finite() {
+                return Err(ControlError::Solver("non-finite input from the QP".into()));
+            }
+            acc_out[a] = u;
+            self.u_prev[a] = u;
+        }
+        self.kf.predict(&self.u_prev);
+        Ok(info)
+    }
+}
