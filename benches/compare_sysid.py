@@ -18,6 +18,7 @@ import statistics
 import time
 
 import numpy as np
+
 from swingrt import _core
 
 DT = 0.03

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 import pytest
+
 import swingrt
 from swingrt import _core, sysid
 from swingrt.errors import ConfigError, DataError, IdentificationError, ModelError
