@@ -49,3 +49,84 @@ class Simulator:
     ) -> None: ...
     def controller_prediction(self) -> npt.NDArray[np.float64] | None: ...
 
+# --- system identification ---------------------------------------------------------------
+
+def sysid_fit(
+    x: npt.NDArray[np.float64],
+    u: npt.NDArray[np.float64],
+    states: list[str],
+    inputs: list[str],
+    *,
+    delays: int,
+    rank: int | None = None,
+    offset: str = "affine",
+    dt: float = 0.03,
+    method: str = "dmdc",
+) -> str: ...
+def sysid_search(
+    x_train: npt.NDArray[np.float64],
+    u_train: npt.NDArray[np.float64],
+    x_test: npt.NDArray[np.float64],
+    u_test: npt.NDArray[np.float64],
+    states: list[str],
+    inputs: list[str],
+    *,
+    method: str = "dmdc",
+    offset: str = "affine",
+    dt: float = 0.03,
+    horizon: int = 667,
+    starts: int = 10,
+    delays: list[int] | None = None,
+    rank_start: int = 5,
+    rank_step: int = 5,
+    rank_extra: int = 0,
+    fine: tuple[int, int] | None = None,
+    stability_tolerance: float = 1e-3,
+) -> tuple[str, list[Any], int]: ...
+def sysid_evaluate(
+    model_json: str,
+    x: npt.NDArray[np.float64],
+    u: npt.NDArray[np.float64],
+    *,
+    horizon: int,
+    starts: int = 10,
+) -> tuple[list[float], float]: ...
+def sysid_predict(
+    model_json: str, history: npt.NDArray[np.float64], inputs: npt.NDArray[np.float64]
+) -> npt.NDArray[np.float64]: ...
+def sysid_check_model(model_json: str) -> tuple[str, float]: ...
+def sysid_whitebox(
+    states: list[str],
+    inputs: list[str],
+    *,
+    payload_mass: float,
+    length: float,
+    vehicle_mass: float = 0.952,
+    friction: float = 0.0,
+    gravity: float = 9.81,
+    dt: float = 0.03,
+    frequency_hz: float | None = None,
+    x: npt.NDArray[np.float64] | None = None,
+    u: npt.NDArray[np.float64] | None = None,
+    offset: str = "none",
+) -> str: ...
+def sysid_fft_peak(
+    signal: npt.NDArray[np.float64], dt: float, f_min: float, f_max: float
+) -> float: ...
+def sysid_cable_length(
+    freq_hz: float, vehicle_mass: float, payload_mass: float, gravity: float
+) -> float: ...
+def sysid_rls_mass(
+    thrust_vertical: npt.NDArray[np.float64],
+    acc_down: npt.NDArray[np.float64],
+    *,
+    gravity: float = 9.81,
+    forgetting: float = 1.0,
+    initial: float = 1.0,
+) -> npt.NDArray[np.float64]: ...
+def sysid_smooth_quadratic(
+    signal: npt.NDArray[np.float64], window: int
+) -> npt.NDArray[np.float64]: ...
+def sysid_smooth_gaussian(
+    signal: npt.NDArray[np.float64], window: int
+) -> npt.NDArray[np.float64]: ...

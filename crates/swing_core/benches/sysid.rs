@@ -37,7 +37,7 @@ fn flight(seconds: f64, seed: u64) -> (Vec<f64>, Vec<f64>) {
     let (ad, bd) = params.discrete(DT);
     let mut rng = Rng(seed);
     let steps = (seconds / DT) as usize;
-    let mut s = nalgebra::Vector3::zeros();
+    let mut s = nalgebra::Vector3::<f64>::zeros();
     let (mut vref, mut next_change) = (0.0, 0usize);
     let (mut x, mut u) = (Vec::with_capacity(2 * steps), Vec::with_capacity(steps));
     for k in 0..steps {

@@ -26,7 +26,8 @@ fn array2<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<PyReadonlyArray2
     let arr: PyReadonlyArray2<'py, f64> = obj
         .extract()
         .map_err(|_| data_err(format!("{name} must be a 2-D numpy array of float64")))?;
-    if arr.as_slice().is_err() {
+    // as_slice also accepts Fortran order, which would scramble the time-major layout.
+    if !arr.is_c_contiguous() {
         return Err(data_err(format!("{name} must be C-contiguous")));
     }
     Ok(arr)

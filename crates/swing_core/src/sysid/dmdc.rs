@@ -97,8 +97,7 @@ impl DmdcBasis {
         };
         let f = feature_matrix(traj, q_max, affine, &input_mean);
         let samples = f.nrows();
-        let qr = f.qr();
-        let r = qr.thin_R().to_owned();
+        let r = triangular_factor(&f, n);
         Ok(Self {
             n,
             m,
@@ -169,6 +168,34 @@ impl DmdcBasis {
             numerical_rank,
         })
     }
+}
+
+/// Upper-triangular R with Rᵀ R = Fᵀ F (R of the thin QR of F, up to row signs).
+///
+/// Fast path: the Gram matrix Fᵀ F by one matrix product and its Cholesky factor — the
+/// same flop count as a Householder QR but at matrix-product speed. Forming Fᵀ F squares
+/// the condition number, so the fast path is kept only when the factor is well
+/// conditioned (smallest/largest diagonal of the regressor block of R above 1e-5, i.e. cond(F) ≲ 1e5, where the
+/// Gram route loses at most ~1e-6 relative accuracy in the weakest direction). Otherwise,
+/// and whenever Cholesky fails (rank-deficient data), the Householder QR of F is used.
+/// Row signs of R do not matter: U, Σ and X'V of the SVD below are invariant to them.
+fn triangular_factor(f: &Mat<f64>, targets: usize) -> Mat<f64> {
+    let gram = f.transpose() * f;
+    if let Ok(llt) = gram.llt(faer::Side::Lower) {
+        let l = llt.L();
+        // Only the regressor block matters for conditioning; the target block's diagonal is
+        // the fit residual, which is tiny exactly when the model fits well.
+        let c = l.nrows() - targets;
+        let (mut lo, mut hi) = (f64::INFINITY, 0.0_f64);
+        for i in 0..c {
+            lo = lo.min(l[(i, i)].abs());
+            hi = hi.max(l[(i, i)].abs());
+        }
+        if lo > 1e-5 * hi {
+            return l.transpose().to_owned();
+        }
+    }
+    f.qr().thin_R().to_owned()
 }
 
 impl DmdcSvd {

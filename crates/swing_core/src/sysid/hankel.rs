@@ -198,3 +198,35 @@ pub fn feature_matrix(
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn feature_matrix_layout() {
+        // n = 1, m = 1: x_k = k, u_k = 10 k.
+        let x: Vec<f64> = (0..6).map(|k| k as f64).collect();
+        let u: Vec<f64> = (0..6).map(|k| 10.0 * k as f64).collect();
+        let traj = Trajectory::new(&x, 1, &u, 1).unwrap();
+        let f = feature_matrix(&traj, 2, true, &[5.0]);
+        // Samples k = 1..4; columns [u − 5, 1, x_k, x_{k−1}, x_{k+1}].
+        assert_eq!(f.nrows(), 4);
+        for r in 0..4 {
+            let k = (r + 1) as f64;
+            let row: Vec<f64> = (0..5).map(|c| f[(r, c)]).collect();
+            assert_eq!(row, vec![10.0 * k - 5.0, 1.0, k, k - 1.0, k + 1.0]);
+        }
+    }
+
+    #[test]
+    fn fingerprint_changes_with_data() {
+        let x = [1.0, 2.0];
+        let u = [0.0];
+        let a = Trajectory::new(&x, 2, &u, 1).unwrap().fingerprint();
+        let y = [1.0, 2.0000001];
+        let b = Trajectory::new(&y, 2, &u, 1).unwrap().fingerprint();
+        assert_ne!(a, b);
+        assert!(a.starts_with("fnv1a64:"));
+    }
+}

@@ -25,6 +25,9 @@ use super::hankel::Trajectory;
 use super::metrics::one_step_nmae;
 use super::model::{LinearModel, Offset};
 
+/// Dense top rows of a delay-form model: (A_top, B_top, c_top, largest forced change).
+pub type TopRows = (DMatrix<f64>, DMatrix<f64>, DVector<f64>, f64);
+
 /// Settings of one HAVOKc fit.
 #[derive(Clone, Debug, PartialEq)]
 pub struct HavokcSettings {
@@ -188,10 +191,7 @@ impl HavokcSvd {
     }
 
     /// Top rows (newest-first delay form) for rank p: (A_top, B_top, c_top, forced change).
-    pub fn top(
-        &self,
-        p: usize,
-    ) -> Result<(DMatrix<f64>, DMatrix<f64>, DVector<f64>, f64), SysidError> {
+    pub fn top(&self, p: usize) -> Result<TopRows, SysidError> {
         let raw = self.raw(p)?;
         let (n, m, q) = (self.n, self.m, self.q);
         let last = (q - 1) * n;

@@ -190,7 +190,7 @@ impl<'a> Scorer<'a> {
         let mut inv_range = Vec::with_capacity(n);
         for i in 0..n {
             let r = hi[i] - lo[i];
-            if !(r > 0.0) {
+            if r.is_nan() || r <= 0.0 {
                 return Err(data(format!(
                     "state {i} is constant over the test data: its range is zero, NMAE is undefined"
                 )));
@@ -226,30 +226,61 @@ impl<'a> Scorer<'a> {
                 "start {s} has fewer than {q} samples of history"
             )));
         }
-        self.buf.resize((q + h) * n, 0.0);
-        let mut per_state = vec![0.0; n];
-        let mut pred = vec![0.0; n];
-        let limit = self.abort_ranges;
-        'starts: for &s in &self.starts {
-            let x = self.traj.x;
-            self.buf[..q * n].copy_from_slice(&x[(s + 1 - q) * n..(s + 1) * n]);
-            let mut err = vec![0.0; n];
-            for k in 0..h {
-                let u = self.traj.input(s + k);
-                rows.step(&self.buf[k * n..(k + q) * n], u, &mut pred);
-                let truth = self.traj.state(s + k + 1);
-                for i in 0..n {
-                    let e = (pred[i] - truth[i]).abs();
-                    if !(e * self.inv_range[i] <= limit) {
-                        per_state.iter_mut().for_each(|v| *v = f64::INFINITY);
-                        break 'starts;
-                    }
-                    err[i] += e;
+        // All start points advance together: the history buffer is interleaved as
+        // buf[(t·n + s)·S + j] (time t, state s, start j), so each model coefficient is
+        // loaded once per step and applied to S contiguous values (vectorisable, no
+        // horizontal sums).
+        let ns = self.starts.len();
+        let nq = n * q;
+        self.buf.resize((q + h) * n * ns, 0.0);
+        let x = self.traj.x;
+        for (j, &st) in self.starts.iter().enumerate() {
+            for b in 0..q {
+                for sidx in 0..n {
+                    self.buf[(b * n + sidx) * ns + j] = x[(st + 1 - q + b) * n + sidx];
                 }
-                self.buf[(q + k) * n..(q + k + 1) * n].copy_from_slice(&pred);
             }
+        }
+        let mut per_state = vec![0.0; n];
+        let mut err = vec![0.0; n * ns];
+        let mut acc = vec![0.0; ns];
+        let limit = self.abort_ranges;
+        let m = rows.m;
+        let mut diverged = false;
+        'steps: for k in 0..h {
+            let (hist, rest) = self.buf.split_at_mut((k + q) * n * ns);
+            let hist = &hist[k * n * ns..];
             for i in 0..n {
-                per_state[i] += err[i] * self.inv_range[i] / h as f64;
+                acc.fill(rows.c[i]);
+                let coef = &rows.a_rev[i * nq..(i + 1) * nq];
+                for (c, a) in coef.iter().enumerate() {
+                    let src = &hist[c * ns..(c + 1) * ns];
+                    for (o, v) in acc.iter_mut().zip(src) {
+                        *o += a * v;
+                    }
+                }
+                for (j, &st) in self.starts.iter().enumerate() {
+                    let u = &self.traj.u[(st + k) * m..(st + k + 1) * m];
+                    let mut v = acc[j];
+                    for l in 0..m {
+                        v += rows.b[i * m + l] * u[l];
+                    }
+                    let e = (v - x[(st + k + 1) * n + i]).abs();
+                    if e.is_nan() || e * self.inv_range[i] > limit {
+                        diverged = true;
+                        break 'steps;
+                    }
+                    err[i * ns + j] += e;
+                    rest[i * ns + j] = v;
+                }
+            }
+        }
+        if diverged {
+            per_state.iter_mut().for_each(|v| *v = f64::INFINITY);
+        } else {
+            for i in 0..n {
+                let total: f64 = err[i * ns..(i + 1) * ns].iter().sum();
+                per_state[i] = total * self.inv_range[i] / h as f64;
             }
         }
         let count = self.starts.len() as f64;
@@ -347,4 +378,26 @@ pub fn one_step_nmae(model: &LinearModel, traj: &Trajectory<'_>) -> Result<f64, 
         sum += if r > 0.0 { err[i] / count / r } else { 0.0 };
     }
     Ok(sum / n as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dot_matches_naive_sum() {
+        let a: Vec<f64> = (0..11).map(|k| k as f64 * 0.5).collect();
+        let b: Vec<f64> = (0..11).map(|k| 1.0 - k as f64).collect();
+        let naive: f64 = a.iter().zip(&b).map(|(x, y)| x * y).sum();
+        assert!((dot(&a, &b) - naive).abs() < 1e-12);
+    }
+
+    #[test]
+    fn constant_state_is_a_data_error() {
+        let x = [1.0, 0.0, 1.0, 1.0, 1.0, 2.0];
+        let u = [0.0, 0.0, 0.0];
+        let traj = Trajectory::new(&x, 2, &u, 1).unwrap();
+        let err = Scorer::new(traj, vec![0], 1).err().unwrap();
+        assert!(err.to_string().contains("state 0 is constant"));
+    }
 }

@@ -400,3 +400,51 @@ pub fn apply_offset(
     model.fingerprint = traj.fingerprint();
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn expm_of_rotation_generator() {
+        // exp([[0, −w], [w, 0]] t) is a rotation by w t.
+        let (w, t) = (2.0, 0.7);
+        let mut m = Matrix4::<f64>::zeros();
+        m[(0, 1)] = -w * t;
+        m[(1, 0)] = w * t;
+        m[(2, 3)] = 1.5; // nilpotent block: exp = I + N
+        let e = expm4(&m);
+        assert!((e[(0, 0)] - (w * t).cos()).abs() < 1e-14);
+        assert!((e[(1, 0)] - (w * t).sin()).abs() < 1e-14);
+        assert!((e[(2, 3)] - 1.5).abs() < 1e-14);
+        assert!((e[(3, 3)] - 1.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn fft_matches_direct_dft() {
+        let mut re: Vec<f64> = (0..8)
+            .map(|k| (k as f64 * 0.3).sin() + 0.1 * k as f64)
+            .collect();
+        let orig = re.clone();
+        let mut im = vec![0.0; 8];
+        fft(&mut re, &mut im);
+        for f in 0..8 {
+            let (mut r, mut i) = (0.0, 0.0);
+            for (k, v) in orig.iter().enumerate() {
+                let ang = -2.0 * std::f64::consts::PI * (f * k) as f64 / 8.0;
+                r += v * ang.cos();
+                i += v * ang.sin();
+            }
+            assert!((re[f] - r).abs() < 1e-12 && (im[f] - i).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn bad_parameters_name_the_field() {
+        let p = WhiteboxParams {
+            length: 0.0,
+            ..Default::default()
+        };
+        assert!(p.validate().unwrap_err().to_string().contains("length"));
+    }
+}

@@ -1,0 +1,80 @@
+"""``swingrt identify``: learn a linear model from flight data (DESIGN section 7)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+from swingrt.errors import ConfigError
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    """Register the subcommand."""
+    p = sub.add_parser(
+        "identify",
+        help="identify a linear model (DMDc, HAVOKc or white-box) from flight data",
+        description="Resamples DATA (.parquet, .csv or PX4 .ulg) to --dt, holds out the first "
+        "--test-span seconds for scoring, trains on the rest and writes a swingrt-model/1 "
+        "JSON file.",
+    )
+    p.add_argument("data", metavar="DATA", help="flight log (.parquet, .csv, .ulg)")
+    p.add_argument("--method", choices=("dmdc", "havokc", "whitebox"), default="dmdc")
+    p.add_argument("--search", action="store_true", help="coarse→fine search over q and p")
+    p.add_argument("--axes", choices=("n", "ne"), default="n", help="North, or North + East")
+    p.add_argument("--delays", type=int, metavar="Q", help="delay count q (default 20)")
+    p.add_argument("--rank", type=int, metavar="P", help="SVD truncation rank p (default full)")
+    p.add_argument("--offset", choices=("none", "mean", "affine"), default="affine")
+    p.add_argument("--dt", type=float, default=0.03, help="model sample time [s]")
+    p.add_argument("--test-span", type=float, default=40.0, help="held-out span [s]")
+    p.add_argument("--smooth", action="store_true", help="smooth states and inputs (4.6.6)")
+    p.add_argument("--plots", metavar="DIR", help="write diagnostic plots into DIR")
+    p.add_argument("-o", "--output", default="model.json", help="model file (.json)")
+    return p
+
+
+def run(args) -> int:
+    """Run the subcommand."""
+    from swingrt import sysid
+    from swingrt.data import load_flight
+
+    if not (math.isfinite(args.dt) and args.dt > 0):
+        raise ConfigError(f"--dt: must be a positive number of seconds (got {args.dt})")
+    if args.delays is not None and args.delays < 1:
+        raise ConfigError(f"--delays: must be at least 1 (got {args.delays})")
+    if args.rank is not None and args.rank < 1:
+        raise ConfigError(f"--rank: must be at least 1 (got {args.rank})")
+    if args.search and (args.delays is not None or args.rank is not None):
+        raise ConfigError("--search chooses q and p itself: drop --delays/--rank")
+    if args.search and args.method == "whitebox":
+        raise ConfigError("--search applies to dmdc and havokc, not whitebox")
+    data = load_flight(args.data)
+    common = dict(
+        method=args.method,
+        axes=args.axes,
+        offset=args.offset,
+        dt=args.dt,
+        test_span=args.test_span,
+        smooth=args.smooth,
+    )
+    result = None
+    if args.search:
+        result = sysid.search(data, **common)
+        model = result.model
+    else:
+        model = sysid.identify(data, delays=args.delays, rank=args.rank, **common)
+    model.save(args.output)
+    nm = model.diagnostics.get("test_nmae")
+    score = f"{nm:.4f}" if isinstance(nm, (int, float)) else "n/a"
+    line = f"{model.method}: q = {model.delays}, p = {model.rank}, test NMAE {score}"
+    wb = model.diagnostics.get("whitebox")
+    if wb:
+        line += f" (m_p {wb['payload_mass']:.3f} kg, l {wb['length']:.3f} m)"
+    print(line)
+    if args.plots:
+        out = Path(args.plots)
+        if result is not None:
+            sysid.plot_pareto(result, out / "error_vs_delays.png")
+            print(f"wrote {out / 'error_vs_delays.png'}")
+    print(f"wrote {args.output}")
+    return 0

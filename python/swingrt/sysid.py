@@ -1,0 +1,753 @@
+"""System identification from flight data (thesis chapter 4; DESIGN sections 4 and 7).
+
+``identify`` turns a flight (a dict of numpy columns named as in DESIGN section 2, or any
+object with a ``.columns`` dict such as a :class:`swingrt.Trace`) into a
+:class:`LinearModel` over delay coordinates, z_{k+1} = A z_k + B (u_k - input_mean) + c with
+z_k = [x_k; x_{k-1}; ...; x_{k-q+1}] (newest first):
+
+* ``dmdc``    DMDc with delay coordinates (eq. 4.9-4.15), rank-p truncated SVD;
+* ``havokc``  HAVOKc (eq. 4.16-4.23) with the structural 0/1 entries forced (figure 4.4);
+* ``whitebox`` the linearised pendulum (eq. 5.7, stable sign) with the cable length from
+  the FFT peak of the swing (eq. 4.8, frequency in Hz) and the payload mass from RLS on hover
+  thrust (section 4.3.2).
+
+The data are resampled linearly onto a uniform grid of ``dt`` (default 0.03 s). The first
+``test_span`` seconds (default 40 s) are held out for scoring; models are trained on the
+rest (section 4.6.1). ``evaluate`` scores a model by the k-step rollout NMAE of section 4.6.2
+(10 start points, 20 s horizon, true inputs only). The numerics run in the Rust core
+(``swingrt._core``); this module prepares columns, splits, sweeps and plots.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from swingrt import _core
+from swingrt._io import atomic_path, write_text_atomic
+from swingrt.errors import ConfigError, DataError, ModelError
+
+__all__ = [
+    "AXES",
+    "LinearModel",
+    "SearchResult",
+    "evaluate",
+    "identify",
+    "plot_pareto",
+    "plot_training_length",
+    "resample",
+    "search",
+    "sweep_noise",
+    "sweep_sample_time",
+    "sweep_training_length",
+]
+
+#: State and input columns per axis choice (DESIGN section 4).
+AXES: dict[str, tuple[list[str], list[str]]] = {
+    "n": (["vn", "swing_n"], ["acc_sp_n"]),
+    "ne": (["vn", "ve", "swing_n", "swing_e"], ["acc_sp_n", "acc_sp_e"]),
+}
+
+#: Vehicle mass of table 6.1 [kg].
+VEHICLE_MASS = 0.952
+GRAVITY = 9.81
+
+_METHODS = ("dmdc", "havokc", "whitebox")
+_OFFSETS = ("none", "mean", "affine")
+
+
+# --------------------------------------------------------------------------- model
+
+
+class LinearModel:
+    """A discrete linear model over delay coordinates (schema ``swingrt-model/1``).
+
+    Attributes mirror the JSON: ``A``, ``B``, ``c`` (numpy), ``dt`` [s], ``delays`` (q),
+    ``rank`` (p), ``states``, ``inputs``, ``offset``, ``input_mean``, ``method``,
+    ``fingerprint`` and ``diagnostics`` (a dict). ``search_table`` holds the scored
+    candidates when the model came from a search.
+    """
+
+    def __init__(self, text: str):
+        # The core validates dimensions and finiteness and adds the spectral radius.
+        self._json, _ = _core.sysid_check_model(text)
+        d = json.loads(self._json)
+        self.method: str = d["method"]
+        self.dt: float = float(d["dt"])
+        self.delays: int = int(d["delays"])
+        self.rank: int = int(d["rank"])
+        self.states: list[str] = list(d["states"])
+        self.inputs: list[str] = list(d["inputs"])
+        self.offset: str = d["offset"]
+        self.input_mean = np.asarray(d["input_mean"], dtype=float)
+        self.A = np.asarray(d["A"], dtype=float)
+        self.B = np.asarray(d["B"], dtype=float)
+        self.c = np.asarray(d["c"], dtype=float)
+        self.fingerprint: str = d.get("fingerprint", "")
+        self.diagnostics: dict[str, Any] = d.get("diagnostics", {})
+        self.search_table: list[dict[str, Any]] | None = None
+
+    def __repr__(self) -> str:
+        nm = self.diagnostics.get("test_nmae")
+        score = f", test NMAE {nm:.4f}" if isinstance(nm, (int, float)) else ""
+        return (
+            f"LinearModel({self.method}, q={self.delays}, p={self.rank}, "
+            f"states={self.states}, inputs={self.inputs}, dt={self.dt}{score})"
+        )
+
+    @property
+    def order(self) -> int:
+        """Dimension n*q of the stacked state."""
+        return len(self.states) * self.delays
+
+    @property
+    def spectral_radius(self) -> float:
+        """Largest eigenvalue modulus of ``A``."""
+        return float(self.diagnostics["spectral_radius"])
+
+    def predict(self, history: Any, inputs: Any) -> np.ndarray:
+        """Roll the model on from ``history`` (the last q state rows, oldest first, shape
+        (q, n)) under future ``inputs`` (shape (H, m)); returns the predicted (H, n) states
+        x_{k+1..k+H}."""
+        h = np.ascontiguousarray(np.asarray(history, dtype=float).reshape(self.delays, -1))
+        u = np.ascontiguousarray(np.asarray(inputs, dtype=float).reshape(-1, len(self.inputs)))
+        out = _core.sysid_predict(self._json, h, u)
+        return out.reshape(-1, len(self.states))
+
+    def to_json(self) -> str:
+        """The ``swingrt-model/1`` JSON text."""
+        return self._json
+
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Write the JSON atomically."""
+        write_text_atomic(path, self._json + "\n")
+
+    @classmethod
+    def from_json(cls, text: str) -> LinearModel:
+        """Parse and validate model JSON (``ModelError`` naming the problem)."""
+        if not isinstance(text, str):
+            raise ModelError("model JSON must be a string")
+        return cls(text)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> LinearModel:
+        """Read a model file."""
+        p = Path(path)
+        if not p.is_file():
+            raise ModelError(f"{p}: no such model file")
+        try:
+            text = p.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ModelError(f"{p}: cannot read: {exc}") from None
+        try:
+            return cls(text)
+        except ModelError as exc:
+            raise ModelError(f"{p}: {exc}") from None
+
+    def to_statespace(self):
+        """The model as a discrete python-control ``StateSpace`` (outputs = newest states).
+
+        The input is u - input_mean; the affine term ``c`` is not representable in a
+        ``StateSpace`` and is returned separately by :meth:`affine_term`.
+        """
+        try:
+            import control
+        except ImportError as exc:  # pragma: no cover - depends on the environment
+            raise ModelError("to_statespace needs the python-control package") from exc
+        n = len(self.states)
+        C = np.zeros((n, self.order))
+        C[:, :n] = np.eye(n)
+        D = np.zeros((n, len(self.inputs)))
+        return control.ss(
+            self.A, self.B, C, D, self.dt, inputs=list(self.inputs), outputs=list(self.states)
+        )
+
+    def affine_term(self) -> np.ndarray:
+        """The constant ``c`` of the stacked state update."""
+        return self.c.copy()
+
+
+@dataclass
+class SearchResult:
+    """A search's selected model and every scored candidate."""
+
+    model: LinearModel
+    table: list[dict[str, Any]] = field(default_factory=list)
+
+    def best_per_delay(self) -> list[dict[str, Any]]:
+        """Lowest stable NMAE per q (the error-vs-q curve of figure 4.6)."""
+        best: dict[int, dict[str, Any]] = {}
+        for row in self.table:
+            if row["stable"] is not True:
+                continue
+            q = row["delays"]
+            if q not in best or row["nmae"] < best[q]["nmae"]:
+                best[q] = row
+        return [best[q] for q in sorted(best)]
+
+
+# --------------------------------------------------------------------------- data
+
+
+def _columns(data: Any) -> Mapping[str, Any]:
+    if hasattr(data, "columns") and isinstance(data.columns, Mapping):
+        return data.columns
+    if isinstance(data, Mapping):
+        return data
+    raise DataError("data must be a dict of numpy columns or an object with a .columns dict")
+
+
+def resample(
+    columns: Mapping[str, Any], dt: float, names: Sequence[str] | None = None
+) -> dict[str, np.ndarray]:
+    """Linearly interpolate every column (or ``names``) onto t0, t0+dt, ... <= t_end.
+
+    Requires a strictly increasing, finite ``t`` column [s]. A non-finite value in a
+    column raises ``DataError`` naming the column and the time.
+    """
+    if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
+        raise ConfigError(f"dt must be a positive number of seconds, not {dt!r}")
+    if "t" not in columns:
+        raise DataError("data has no time column 't'")
+    t = np.asarray(columns["t"], dtype=float)
+    if t.ndim != 1 or len(t) < 2:
+        raise DataError("column 't' must be one-dimensional with at least two samples")
+    if not np.all(np.isfinite(t)):
+        raise DataError(f"column 't' is not finite at index {int(np.argmin(np.isfinite(t)))}")
+    if np.any(np.diff(t) <= 0):
+        k = int(np.argmax(np.diff(t) <= 0))
+        raise DataError(f"column 't' is not strictly increasing at t = {t[k]:.3f} s")
+    wanted = list(names) if names is not None else [k for k in columns if k != "t"]
+    missing = [k for k in wanted if k not in columns]
+    if missing:
+        raise DataError(f"data lacks column(s) {', '.join(missing)}")
+    count = int(math.floor((t[-1] - t[0]) / dt + 1e-9)) + 1
+    grid = t[0] + dt * np.arange(count)
+    out: dict[str, np.ndarray] = {"t": grid}
+    for name in wanted:
+        v = np.asarray(columns[name])
+        if v.dtype.kind not in "fiub" or v.shape != t.shape:
+            if v.shape != t.shape:
+                raise DataError(f"column {name!r} has {v.shape} samples, 't' has {t.shape}")
+            continue  # non-numeric columns are not resampled
+        v = v.astype(float)
+        bad = ~np.isfinite(v)
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise DataError(f"column {name!r} is not finite (NaN gap?) at t = {t[k]:.3f} s")
+        out[name] = np.interp(grid, t, v)
+    return out
+
+
+def _check_choice(name: str, value: str, choices: Sequence[str]) -> None:
+    if value not in choices:
+        raise ConfigError(f"{name} must be one of {', '.join(choices)}, not {value!r}")
+
+
+def _prepare(
+    data: Any,
+    axes: str,
+    dt: float,
+    smooth: bool = False,
+    smooth_window: int = 20,
+    extra: Sequence[str] = (),
+) -> tuple[np.ndarray, np.ndarray, list[str], list[str], dict[str, np.ndarray]]:
+    _check_choice("axes", axes, tuple(AXES))
+    states, inputs = AXES[axes]
+    cols = resample(_columns(data), dt, names=[*states, *inputs, *extra])
+    x = np.column_stack([cols[s] for s in states])
+    u = np.column_stack([cols[s] for s in inputs])
+    if smooth:
+        # Section 4.6.6: quadratic regression for states, Gaussian average for inputs.
+        x = np.column_stack(
+            [_core.sysid_smooth_quadratic(np.ascontiguousarray(c), smooth_window) for c in x.T]
+        )
+        u = np.column_stack(
+            [_core.sysid_smooth_gaussian(np.ascontiguousarray(c), smooth_window) for c in u.T]
+        )
+    return np.ascontiguousarray(x), np.ascontiguousarray(u), states, inputs, cols
+
+
+def _split(x: np.ndarray, u: np.ndarray, test_span: float, dt: float):
+    if not (math.isfinite(test_span) and test_span >= 0):
+        raise ConfigError(f"test_span must be >= 0 s, not {test_span}")
+    k = int(round(test_span / dt))
+    if k >= len(x):
+        raise DataError(
+            f"the data ({len(x) * dt:.1f} s) is not longer than the test span ({test_span} s)"
+        )
+    return (x[k:], u[k:]), (x[:k], u[:k])
+
+
+def _horizon_steps(horizon: float, dt: float) -> int:
+    if not (math.isfinite(horizon) and horizon > 0):
+        raise ConfigError(f"horizon must be a positive number of seconds, not {horizon}")
+    return max(1, int(round(horizon / dt)))
+
+
+# --------------------------------------------------------------------------- identify
+
+
+def _coarse_delays(q_max: int) -> list[int]:
+    return list(range(2, q_max + 1, 4))
+
+
+def search(
+    data: Any,
+    *,
+    method: str = "dmdc",
+    axes: str = "n",
+    offset: str = "affine",
+    dt: float = 0.03,
+    test_span: float = 40.0,
+    horizon: float = 20.0,
+    starts: int = 10,
+    delays: Sequence[int] | None = None,
+    rank_start: int = 5,
+    rank_step: int = 5,
+    fine: tuple[int, int] | None = (2, 4),
+    smooth: bool = False,
+    smooth_window: int = 20,
+    stability_tolerance: float = 1e-3,
+) -> SearchResult:
+    """Grid (``fine=None``) or coarse->fine search over (q, p); selects on the first
+    ``test_span`` seconds, trains on the rest (section 4.6.3). ``delays`` defaults to
+    q = 2, 6, ..., 58 coarse, then unit steps within ``fine`` = (q radius, p radius)."""
+    _check_choice("method", method, ("dmdc", "havokc"))
+    _check_choice("offset", offset, _OFFSETS)
+    x, u, states, inputs, _ = _prepare(data, axes, dt, smooth, smooth_window)
+    (xtr, utr), (xte, ute) = _split(x, u, test_span, dt)
+    if len(xte) == 0:
+        raise ConfigError("a search needs a test span > 0 s")
+    h = _horizon_steps(horizon, dt)
+    qs = list(delays) if delays is not None else _coarse_delays(60)
+    text, rows, best = _core.sysid_search(
+        np.ascontiguousarray(xtr),
+        np.ascontiguousarray(utr),
+        np.ascontiguousarray(xte),
+        np.ascontiguousarray(ute),
+        states,
+        inputs,
+        method=method,
+        offset=offset,
+        dt=dt,
+        horizon=h,
+        starts=starts,
+        delays=qs,
+        rank_start=rank_start,
+        rank_step=rank_step,
+        rank_extra=1 if offset == "affine" else 0,
+        fine=tuple(fine) if fine else None,
+        stability_tolerance=stability_tolerance,
+    )
+    table = [
+        {
+            "delays": q,
+            "rank": p,
+            "nmae": nm,
+            "per_state": {name: per[i] for i, name in enumerate(states)},
+            "stable": stable,
+            "spectral_radius": rho,
+        }
+        for (q, p, nm, per, stable, rho) in rows
+    ]
+    model = LinearModel(text)
+    model.search_table = table
+    model.diagnostics["selected"] = table[best]
+    return SearchResult(model=model, table=table)
+
+
+def identify(
+    data: Any,
+    *,
+    method: str = "dmdc",
+    axes: str = "n",
+    delays: int | None = None,
+    rank: int | None = None,
+    offset: str = "affine",
+    search: bool = False,
+    dt: float = 0.03,
+    test_span: float = 40.0,
+    horizon: float = 20.0,
+    starts: int = 10,
+    smooth: bool = False,
+    smooth_window: int = 20,
+    payload_mass: float | None = None,
+    cable_length: float | None = None,
+    vehicle_mass: float = VEHICLE_MASS,
+    friction: float = 0.0,
+    swing_band: tuple[float, float] = (0.1, 3.0),
+) -> LinearModel:
+    """Identify a model from a flight.
+
+    ``method``: ``dmdc`` | ``havokc`` | ``whitebox``; ``axes``: ``n`` (``[vn, swing_n] <-
+    acc_sp_n``) or ``ne``; ``offset``: ``none`` | ``mean`` | ``affine``. With ``search``
+    (DMDc/HAVOKc) q and p come from a coarse->fine search; otherwise ``delays`` (default
+    20) and ``rank`` (default full). The first ``test_span`` seconds are held out and the
+    model's ``diagnostics['test_nmae']`` is its rollout NMAE there; ``test_span=0`` trains
+    on everything. White-box: ``payload_mass`` from RLS on the ``thrust`` column unless
+    given, ``cable_length`` from the swing FFT peak unless given.
+    """
+    _check_choice("method", method, _METHODS)
+    _check_choice("offset", offset, _OFFSETS)
+    _check_choice("axes", axes, tuple(AXES))
+    if search and method == "whitebox":
+        raise ConfigError("--search applies to dmdc and havokc, not whitebox")
+    if search:
+        if delays is not None or rank is not None:
+            raise ConfigError("give either search or delays/rank, not both")
+        res = globals()["search"](
+            data,
+            method=method,
+            axes=axes,
+            offset=offset,
+            dt=dt,
+            test_span=test_span,
+            horizon=horizon,
+            starts=starts,
+            smooth=smooth,
+            smooth_window=smooth_window,
+        )
+        return res.model
+    x, u, states, inputs, cols = _prepare(data, axes, dt, smooth, smooth_window)
+    (xtr, utr), (xte, ute) = _split(x, u, test_span, dt)
+    if method == "whitebox":
+        text = _whitebox(
+            data,
+            xtr,
+            utr,
+            states,
+            inputs,
+            dt,
+            offset,
+            payload_mass,
+            cable_length,
+            vehicle_mass,
+            friction,
+            swing_band,
+            test_span,
+        )
+    else:
+        q = 20 if delays is None else delays
+        if not isinstance(q, int) or q < 1:
+            raise ConfigError(f"delays must be a positive integer, not {delays!r}")
+        if rank is not None and (not isinstance(rank, int) or rank < 1):
+            raise ConfigError(f"rank must be a positive integer, not {rank!r}")
+        text = _core.sysid_fit(
+            np.ascontiguousarray(xtr),
+            np.ascontiguousarray(utr),
+            states,
+            inputs,
+            delays=q,
+            rank=rank,
+            offset=offset,
+            dt=dt,
+            method=method,
+        )
+    model = LinearModel(text)
+    if len(xte):
+        try:
+            score = _score(model, xte, ute, horizon, starts)
+            model = _with_diagnostics(model, test_nmae=score["nmae"])
+        except DataError:
+            pass  # test span too short for the horizon: no held-out score
+    return model
+
+
+def _with_diagnostics(model: LinearModel, **items: Any) -> LinearModel:
+    d = json.loads(model.to_json())
+    d["diagnostics"].update(items)
+    table = model.search_table
+    out = LinearModel(json.dumps(d))
+    out.search_table = table
+    return out
+
+
+def _whitebox(
+    data,
+    xtr,
+    utr,
+    states,
+    inputs,
+    dt,
+    offset,
+    payload_mass,
+    cable_length,
+    vehicle_mass,
+    friction,
+    swing_band,
+    test_span,
+) -> str:
+    axes = len(inputs)
+    if payload_mass is None:
+        payload_mass = estimate_payload_mass(data, vehicle_mass=vehicle_mass, skip=test_span)
+    freq = None
+    if cable_length is None:
+        swing_cols = range(axes, 2 * axes)
+        # Use the axis that swings most; its FFT peak is the pendulum frequency.
+        j = max(swing_cols, key=lambda i: float(np.std(xtr[:, i])))
+        freq = _core.sysid_fft_peak(np.ascontiguousarray(xtr[:, j]), dt, *swing_band)
+        cable_length = _core.sysid_cable_length(freq, vehicle_mass, payload_mass, GRAVITY)
+    return _core.sysid_whitebox(
+        states,
+        inputs,
+        payload_mass=payload_mass,
+        length=cable_length,
+        vehicle_mass=vehicle_mass,
+        friction=friction,
+        dt=dt,
+        frequency_hz=freq,
+        x=np.ascontiguousarray(xtr),
+        u=np.ascontiguousarray(utr),
+        offset=offset,
+    )
+
+
+def estimate_payload_mass(
+    data: Any, *, vehicle_mass: float = VEHICLE_MASS, skip: float = 0.0, forgetting: float = 1.0
+) -> float:
+    """Payload mass [kg] by RLS on hover thrust (section 4.3.2): total rotor thrust
+    (``thrust``, projected on the vertical with ``roll``/``pitch`` when present) against
+    g - a_down, with a_down the derivative of ``vd``; minus the known vehicle mass."""
+    cols = _columns(data)
+    if "thrust" not in cols:
+        raise DataError("white-box needs a 'thrust' column for the mass estimate, or payload_mass")
+    names = ["thrust", "vd"] + [k for k in ("roll", "pitch") if k in cols]
+    r = resample(cols, 0.01, names=names)
+    t = r["t"]
+    keep = t >= t[0] + skip
+    thrust = r["thrust"] * np.cos(r.get("roll", 0.0)) * np.cos(r.get("pitch", 0.0))
+    acc = np.gradient(r["vd"], t)
+    est = _core.sysid_rls_mass(
+        np.ascontiguousarray(thrust[keep]),
+        np.ascontiguousarray(acc[keep]),
+        gravity=GRAVITY,
+        forgetting=forgetting,
+        initial=vehicle_mass,
+    )
+    mass = float(est[-1]) - vehicle_mass
+    if not mass > 0:
+        raise DataError(f"estimated payload mass {mass:.3f} kg is not positive")
+    return mass
+
+
+# --------------------------------------------------------------------------- evaluate
+
+
+def _score(model: LinearModel, x, u, horizon: float, starts: int) -> dict[str, Any]:
+    h = _horizon_steps(horizon, model.dt)
+    per, mean = _core.sysid_evaluate(
+        model.to_json(),
+        np.ascontiguousarray(x),
+        np.ascontiguousarray(u),
+        horizon=h,
+        starts=starts,
+    )
+    return {"nmae": mean, "per_state": {s: per[i] for i, s in enumerate(model.states)}}
+
+
+def evaluate(
+    model: LinearModel,
+    data: Any,
+    *,
+    test_span: float | None = None,
+    horizon: float = 20.0,
+    starts: int = 10,
+) -> dict[str, Any]:
+    """k-step rollout NMAE (section 4.6.2) of ``model`` on ``data`` resampled to the
+    model's dt: ``starts`` evenly spaced start points, ``horizon`` seconds, true inputs only.
+    ``test_span`` limits scoring to the first seconds of the data (default: all of it).
+    Returns ``{"nmae": mean, "per_state": {name: nmae}}``."""
+    cols = resample(_columns(data), model.dt, names=[*model.states, *model.inputs])
+    x = np.column_stack([cols[s] for s in model.states])
+    u = np.column_stack([cols[s] for s in model.inputs])
+    if test_span is not None:
+        k = int(round(test_span / model.dt))
+        x, u = x[:k], u[:k]
+    return _score(model, x, u, horizon, starts)
+
+
+# --------------------------------------------------------------------------- sweeps
+
+
+def sweep_training_length(
+    data: Any,
+    lengths: Sequence[float],
+    *,
+    method: str = "dmdc",
+    axes: str = "n",
+    offset: str = "affine",
+    dt: float = 0.03,
+    test_span: float = 40.0,
+    delays: Sequence[int] | None = None,
+    fine: tuple[int, int] | None = None,
+    smooth: bool = False,
+) -> list[dict[str, Any]]:
+    """Error vs training length (section 4.6.8): for each length [s] the training data
+    (after the test span) are cut to that length and a search picks (q, p). Rows:
+    ``train_length, delays, rank, nmae``."""
+    cols = dict(_columns(data))
+    t = np.asarray(cols["t"], dtype=float)
+    rows = []
+    for length in lengths:
+        end = t[0] + test_span + float(length)
+        keep = t <= end + 1e-9
+        sub = {k: np.asarray(v)[keep] for k, v in cols.items() if np.shape(v) == t.shape}
+        try:
+            res = search(
+                sub,
+                method=method,
+                axes=axes,
+                offset=offset,
+                dt=dt,
+                test_span=test_span,
+                delays=delays,
+                fine=fine,
+                smooth=smooth,
+            )
+            sel = res.model.diagnostics["selected"]
+            rows.append(
+                {
+                    "train_length": float(length),
+                    "delays": sel["delays"],
+                    "rank": sel["rank"],
+                    "nmae": sel["nmae"],
+                }
+            )
+        except (DataError, _identification_error()) as exc:
+            rows.append(
+                {
+                    "train_length": float(length),
+                    "delays": None,
+                    "rank": None,
+                    "nmae": math.inf,
+                    "error": str(exc),
+                }
+            )
+    return rows
+
+
+def _identification_error():
+    from swingrt.errors import IdentificationError
+
+    return IdentificationError
+
+
+def sweep_sample_time(
+    data: Any,
+    dts: Sequence[float],
+    *,
+    method: str = "dmdc",
+    axes: str = "n",
+    offset: str = "affine",
+    test_span: float = 40.0,
+    delays: Sequence[int] | None = None,
+) -> list[dict[str, Any]]:
+    """Error vs sample time (section 4.6.4): resample at each Ts and search. Rows:
+    ``dt, delays, rank, nmae``."""
+    rows = []
+    for dt in dts:
+        res = search(
+            data,
+            method=method,
+            axes=axes,
+            offset=offset,
+            dt=float(dt),
+            test_span=test_span,
+            delays=delays,
+            fine=None,
+        )
+        sel = res.model.diagnostics["selected"]
+        rows.append(
+            {"dt": float(dt), "delays": sel["delays"], "rank": sel["rank"], "nmae": sel["nmae"]}
+        )
+    return rows
+
+
+def sweep_noise(
+    data: Any,
+    lengths: Sequence[float],
+    *,
+    noise_std: float = 0.01,
+    seed: int = 0,
+    method: str = "havokc",
+    smooth: bool = True,
+    **kwargs: Any,
+) -> list[dict[str, Any]]:
+    """Error vs training length with and without swing-sensor noise (section 4.6.6, figure
+    4.11): seeded white noise of ``noise_std`` [rad] is added to the swing columns at the
+    data's own rate (band-limited by the later resampling); the noisy runs are smoothed
+    when ``smooth``. Rows: ``train_length, noise, delays, rank, nmae``."""
+    cols = {k: np.asarray(v) for k, v in _columns(data).items()}
+    rng = np.random.default_rng(seed)
+    noisy = dict(cols)
+    for name in ("swing_n", "swing_e"):
+        if name in noisy:
+            noisy[name] = noisy[name] + rng.normal(0.0, noise_std, size=noisy[name].shape)
+    rows = []
+    for flag, d, sm in ((False, cols, False), (True, noisy, smooth)):
+        for row in sweep_training_length(d, lengths, method=method, smooth=sm, **kwargs):
+            rows.append({**row, "noise": flag})
+    return rows
+
+
+# --------------------------------------------------------------------------- plots
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, path: str | os.PathLike[str]) -> None:
+    suffix = Path(path).suffix or ".png"
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format=suffix.lstrip("."), dpi=120, bbox_inches="tight")
+    _pyplot().close(fig)
+
+
+def plot_pareto(result: SearchResult, path: str | os.PathLike[str]) -> None:
+    """Lowest stable NMAE per q (the Pareto elbow of figure 4.6), saved atomically."""
+    plt = _pyplot()
+    rows = result.best_per_delay()
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.plot([r["delays"] for r in rows], [r["nmae"] for r in rows], "o-")
+    sel = result.model.diagnostics.get("selected")
+    if sel:
+        ax.plot([sel["delays"]], [sel["nmae"]], "r*", ms=12, label="selected")
+        ax.legend()
+    ax.set_xlabel("delays q")
+    ax.set_ylabel("held-out NMAE (best stable p)")
+    ax.set_yscale("log")
+    ax.grid(True, which="both", alpha=0.3)
+    _save(fig, path)
+
+
+def plot_training_length(rows: list[dict[str, Any]], path: str | os.PathLike[str]) -> None:
+    """NMAE vs training length (the double descent of section 4.6.8), one line per
+    ``noise`` flag when present, saved atomically."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6, 4))
+    groups: dict[Any, list[dict[str, Any]]] = {}
+    for r in rows:
+        groups.setdefault(r.get("noise"), []).append(r)
+    for key, rs in groups.items():
+        rs = [r for r in rs if math.isfinite(r["nmae"])]
+        label = {None: "NMAE", True: "with noise", False: "without noise"}[key]
+        ax.plot([r["train_length"] for r in rs], [r["nmae"] for r in rs], "o-", label=label)
+    ax.set_xlabel("training length [s]")
+    ax.set_ylabel("held-out NMAE")
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    _save(fig, path)
