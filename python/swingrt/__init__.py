@@ -12,14 +12,18 @@ from swingrt._core import __version__
 from swingrt.metrics import step_metrics
 from swingrt.scenario import resolve as resolve_scenario
 from swingrt.sim import Simulator, collect, simulate
+from swingrt.sysid import LinearModel, evaluate, identify
 from swingrt.trace import Trace
 
 __all__ = [
     "__version__",
     "errors",
+    "LinearModel",
     "Simulator",
     "Trace",
     "collect",
+    "evaluate",
+    "identify",
     "resolve_scenario",
     "simulate",
     "step_metrics",

@@ -1,5 +1,7 @@
 """Type stubs of the Rust extension ``swingrt._core`` (checked by ``stubtest`` in CI)."""
 
+from typing import Any
+
 import numpy as np
 import numpy.typing as npt
 
