@@ -485,3 +485,125 @@ fn predicted_trajectory_matches_an_open_loop_rollout() {
         assert!((pred[3 * i + 1] - (z[1] - prev_s) / m.dt).abs() < 1e-7, "rate at {i}");
     }
 }
+
+// ------------------------------------------------- no allocation per tick
+
+mod counting {
+    use std::alloc::{GlobalAlloc, Layout, System};
+    use std::cell::Cell;
+
+    thread_local! {
+        static COUNTING: Cell<bool> = const { Cell::new(false) };
+        static COUNT: Cell<usize> = const { Cell::new(0) };
+    }
+
+    pub struct Counter;
+
+    unsafe impl GlobalAlloc for Counter {
+        unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+            let _ = COUNTING.try_with(|c| {
+                if c.get() {
+                    let _ = COUNT.try_with(|n| n.set(n.get() + 1));
+                }
+            });
+            unsafe { System.alloc(layout) }
+        }
+        unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+            unsafe { System.dealloc(ptr, layout) }
+        }
+        unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+            let _ = COUNTING.try_with(|c| {
+                if c.get() {
+                    let _ = COUNT.try_with(|n| n.set(n.get() + 1));
+                }
+            });
+            unsafe { System.realloc(ptr, layout, new_size) }
+        }
+    }
+
+    /// Allocations made on this thread while running `f`.
+    pub fn count<F: FnOnce()>(f: F) -> usize {
+        COUNT.with(|n| n.set(0));
+        COUNTING.with(|c| c.set(true));
+        f();
+        COUNTING.with(|c| c.set(false));
+        COUNT.with(|n| n.get())
+    }
+}
+
+#[global_allocator]
+static ALLOC: counting::Counter = counting::Counter;
+
+#[test]
+fn mpc_and_lqr_ticks_allocate_nothing() {
+    let m = model(0.3, 2.0, 4);
+    for (s, must_constrain) in [
+        (MpcSettings { acc_max: None, ..Default::default() }, false),
+        (MpcSettings { acc_max: Some(1.0), jerk_max: Some(20.0), solver: QpSolverKind::ActiveSet, ..Default::default() }, true),
+    ] {
+        let mut ctrl = MpcController::new(&m, s).unwrap();
+        let mut plant = LinearPlant::new(&m);
+        ctrl.reset(&plant.state(), &[0.0]);
+        let mut constrained = 0;
+        for k in 0..300 {
+            let st = plant.state();
+            let r = [if (k / 100) % 2 == 0 { 4.0 } else { -4.0 }];
+            let mut u = [0.0];
+            let mut info = None;
+            let n = counting::count(|| info = Some(ctrl.step(&st, &r, &mut u).unwrap()));
+            assert_eq!(n, 0, "tick {k} allocated {n} times");
+            if info.unwrap().kind == TickKind::Constrained {
+                constrained += 1;
+            }
+            plant.step(&u, &[0.0]);
+        }
+        assert_eq!(constrained > 0, must_constrain);
+    }
+    let mut lqr = LqrController::new(params(0.2, 1.0), 2, LqrSettings::default()).unwrap();
+    let st = [AxisState::default(); 2];
+    let mut u = [0.0; 2];
+    let n = counting::count(|| {
+        for _ in 0..100 {
+            lqr.step(&st, &[1.0, -1.0], &mut u).unwrap();
+        }
+    });
+    assert_eq!(n, 0);
+}
+
+/// Tuning table (run with `--ignored --nocapture`): 2 m/s step on the exact pendulum for
+/// the seed's payload range, MPC weight sets and the LQR for reference.
+#[test]
+#[ignore]
+fn tuning_report() {
+    let sets: Vec<(&str, MpcSettings)> = vec![
+        ("default", MpcSettings::default()),
+        ("v1 sr0.5 du1", MpcSettings { w_swing_rate: 0.5, ..Default::default() }),
+        ("v1 sr2 du1", MpcSettings { w_swing_rate: 2.0, ..Default::default() }),
+        ("v1 sr1 du0.5", MpcSettings { w_acc_rate: 0.5, ..Default::default() }),
+        ("v1 sr1 du2", MpcSettings { w_acc_rate: 2.0, ..Default::default() }),
+        ("v1 sr1 du1 Np60", MpcSettings { horizon: 60, ..Default::default() }),
+    ];
+    let metrics = |vs: &[f64], ss: &[f64], dt: f64| {
+        let peak = ss.iter().map(|x| x.abs()).fold(0.0, f64::max).to_degrees();
+        let iae = ss.iter().map(|x| x.abs()).sum::<f64>() * dt * 57.2958;
+        let rise = vs.iter().position(|v| *v >= 1.8).map(|k| k as f64 * dt).unwrap_or(f64::NAN);
+        let over = (vs.iter().cloned().fold(f64::MIN, f64::max) - 2.0) / 2.0 * 100.0;
+        let settle = ss.iter().rposition(|x| x.abs() > 1f64.to_radians()).map(|k| (k + 1) as f64 * dt).unwrap_or(0.0);
+        format!("peak {peak:5.1}°  IAE {iae:6.2}°s  rise90 {rise:5.2}s  overshoot {over:5.1}%  swing<1° after {settle:5.2}s")
+    };
+    for l in [0.5, 1.0, 2.0] {
+        for m_p in [0.1, 0.3] {
+            let p = params(m_p, l);
+            let m = model(m_p, l, 2);
+            println!("l = {l} m, m_p = {m_p} kg");
+            for (name, s) in &sets {
+                let mut c = MpcController::new(&m, s.clone()).unwrap();
+                let (vs, ss, _) = simulate_pendulum(p, &mut c, 2.0, 15.0, 0.0);
+                println!("  MPC {name:<18} {}", metrics(&vs, &ss, TS));
+            }
+            let mut lqr = LqrController::new(p, 1, LqrSettings::default()).unwrap();
+            let (vs, ss, _) = simulate_pendulum(p, &mut lqr, 2.0, 15.0, 0.0);
+            println!("  LQR {:<18} {}", "seed weights", metrics(&vs, &ss, 0.02));
+        }
+    }
+}

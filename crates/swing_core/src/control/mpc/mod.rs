@@ -16,6 +16,7 @@ pub mod active_set;
 pub mod condense;
 pub mod estimator;
 pub mod qp;
+pub mod timing;
 
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
