@@ -85,7 +85,7 @@ impl Default for MpcSettings {
             horizon: 100,
             control_horizon: 20,
             w_velocity: 1.0,
-            w_swing_rate: 1.0,
+            w_swing_rate: 2.0,
             w_swing: 0.0,
             w_acc: 0.0,
             w_acc_rate: 1.0,
