@@ -57,7 +57,9 @@ fn timed_ticks(m: &LinearModel, s: &MpcSettings, constrained: bool, iters: u64) 
         }
         plant.measure(&mut st);
         let t0 = Instant::now();
-        let info = ctrl.step(black_box(&st), black_box(&r), &mut u).expect("tick");
+        let info = ctrl
+            .step(black_box(&st), black_box(&r), &mut u)
+            .expect("tick");
         let el = t0.elapsed();
         if !constrained || info.kind == TickKind::Constrained {
             total += el;

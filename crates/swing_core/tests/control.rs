@@ -5,7 +5,9 @@
 //! horizon MPC) and closed-loop simulations of the linear models.
 
 use nalgebra::{DMatrix, DVector};
-use swing_core::control::lqr::{c2d_zoh, care, dare, sampled_lqr, LqrController, LqrSettings, PendulumParams};
+use swing_core::control::lqr::{
+    c2d_zoh, care, dare, sampled_lqr, LqrController, LqrSettings, PendulumParams,
+};
 use swing_core::control::mpc::{DisturbanceModel, MpcController, MpcSettings, QpSolverKind};
 use swing_core::control::{AxisState, ControlError, SwingController, TickKind};
 use swing_core::sysid::LinearModel;
@@ -21,19 +23,34 @@ fn params(m_p: f64, l: f64) -> PendulumParams {
     }
 }
 
-fn care_residual(a: &DMatrix<f64>, b: &DMatrix<f64>, q: &DMatrix<f64>, r: &DMatrix<f64>, p: &DMatrix<f64>) -> f64 {
+fn care_residual(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    r: &DMatrix<f64>,
+    p: &DMatrix<f64>,
+) -> f64 {
     let g = b * r.clone().try_inverse().unwrap() * b.transpose();
     (a.transpose() * p + p * a - p * g * p + q).norm() / (1.0 + q.norm())
 }
 
-fn dare_residual(a: &DMatrix<f64>, b: &DMatrix<f64>, q: &DMatrix<f64>, r: &DMatrix<f64>, p: &DMatrix<f64>) -> f64 {
+fn dare_residual(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    r: &DMatrix<f64>,
+    p: &DMatrix<f64>,
+) -> f64 {
     let s = r + b.transpose() * p * b;
     let k = s.try_inverse().unwrap() * b.transpose() * p * a;
     (a.transpose() * p * a - p - a.transpose() * p * b * k + q).norm() / (1.0 + q.norm())
 }
 
 fn spectral_radius(m: &DMatrix<f64>) -> f64 {
-    m.complex_eigenvalues().iter().map(|l| l.norm()).fold(0.0, f64::max)
+    m.complex_eigenvalues()
+        .iter()
+        .map(|l| l.norm())
+        .fold(0.0, f64::max)
 }
 
 #[test]
@@ -46,7 +63,11 @@ fn care_on_the_lqr_model_has_zero_residual_and_stable_loop() {
         assert!(care_residual(&a, &b, &q, &r, &sol.p) < 1e-9);
         assert!((&sol.p - sol.p.transpose()).amax() < 1e-9);
         let acl = &a - &b * &sol.k;
-        let max_re = acl.complex_eigenvalues().iter().map(|l| l.re).fold(f64::MIN, f64::max);
+        let max_re = acl
+            .complex_eigenvalues()
+            .iter()
+            .map(|l| l.re)
+            .fold(f64::MIN, f64::max);
         assert!(max_re < 0.0, "closed loop unstable: {max_re}");
         // P is positive semi-definite.
         let ev = sol.p.clone().symmetric_eigenvalues();
@@ -75,7 +96,9 @@ fn dare_matches_value_iteration_on_a_random_system() {
     let mut p = q.clone();
     for _ in 0..5000 {
         let s = &r + b.transpose() * &p * &b;
-        p = a.transpose() * &p * &a - a.transpose() * &p * &b * s.try_inverse().unwrap() * b.transpose() * &p * &a + &q;
+        p = a.transpose() * &p * &a
+            - a.transpose() * &p * &b * s.try_inverse().unwrap() * b.transpose() * &p * &a
+            + &q;
     }
     let sol = dare(&a, &b, &q, &r).unwrap();
     assert!((&sol.p - &p).amax() < 1e-9 * p.amax());
@@ -112,7 +135,11 @@ fn simulate_pendulum(
     let (mut vs, mut ss, mut us) = (vec![], vec![], vec![]);
     let mut u = [0.0];
     for _ in 0..steps {
-        let st = AxisState { v: x[0], swing: x[1], swing_rate: x[2] };
+        let st = AxisState {
+            v: x[0],
+            swing: x[1],
+            swing_rate: x[2],
+        };
         ctrl.step(&[st], &[v_ref], &mut u).unwrap();
         x = &ad * &x + &bd * (u[0] + accel_disturbance);
         vs.push(x[0]);
@@ -133,25 +160,48 @@ fn lqr_tracks_a_velocity_step_and_damps_the_swing() {
         assert!((vs[n - 1] - 2.0).abs() < 1e-3, "v_end = {}", vs[n - 1]);
         // Swing settles to its steady value (a constant offset from the disturbance).
         let tail = &ss[n - 100..];
-        let spread = tail.iter().cloned().fold(f64::MIN, f64::max) - tail.iter().cloned().fold(f64::MAX, f64::min);
+        let spread = tail.iter().cloned().fold(f64::MIN, f64::max)
+            - tail.iter().cloned().fold(f64::MAX, f64::min);
         assert!(spread < 1e-3, "swing still oscillating: {spread}");
     }
 }
 
 #[test]
 fn lqr_rejects_bad_settings_and_inputs() {
-    let bad = LqrSettings { r: 0.0, ..Default::default() };
-    assert!(matches!(LqrController::new(params(0.2, 1.0), 1, bad), Err(ControlError::Config(_))));
+    let bad = LqrSettings {
+        r: 0.0,
+        ..Default::default()
+    };
     assert!(matches!(
-        LqrController::new(PendulumParams { l: 0.0, ..params(0.2, 1.0) }, 1, LqrSettings::default()),
+        LqrController::new(params(0.2, 1.0), 1, bad),
+        Err(ControlError::Config(_))
+    ));
+    assert!(matches!(
+        LqrController::new(
+            PendulumParams {
+                l: 0.0,
+                ..params(0.2, 1.0)
+            },
+            1,
+            LqrSettings::default()
+        ),
         Err(ControlError::Config(_))
     ));
     assert!(LqrController::new(params(0.2, 1.0), 3, LqrSettings::default()).is_err());
     let mut c = LqrController::new(params(0.2, 1.0), 2, LqrSettings::default()).unwrap();
     let mut out = [0.0; 2];
-    assert!(matches!(c.step(&[AxisState::default()], &[0.0, 0.0], &mut out), Err(ControlError::Input(_))));
-    let nan = AxisState { v: f64::NAN, ..Default::default() };
-    assert!(matches!(c.step(&[nan, nan], &[0.0, 0.0], &mut out), Err(ControlError::Input(_))));
+    assert!(matches!(
+        c.step(&[AxisState::default()], &[0.0, 0.0], &mut out),
+        Err(ControlError::Input(_))
+    ));
+    let nan = AxisState {
+        v: f64::NAN,
+        ..Default::default()
+    };
+    assert!(matches!(
+        c.step(&[nan, nan], &[0.0, 0.0], &mut out),
+        Err(ControlError::Input(_))
+    ));
 }
 
 // ---------------------------------------------------------------- MPC
@@ -182,30 +232,63 @@ struct LinearPlant {
 
 impl LinearPlant {
     fn new(m: &LinearModel) -> Self {
-        Self { z: DVector::zeros(m.a.nrows()), m: m.clone() }
+        Self {
+            z: DVector::zeros(m.a.nrows()),
+            m: m.clone(),
+        }
     }
     fn state(&self) -> Vec<AxisState> {
         let n = self.m.states.len();
         let axes = self.m.inputs.len();
         (0..axes)
             .map(|a| {
-                let iv = self.m.states.iter().position(|s| s == ["vn", "ve"][a]).unwrap();
-                let is = self.m.states.iter().position(|s| s == ["swing_n", "swing_e"][a]).unwrap();
-                let rate = match self.m.states.iter().position(|s| s == ["swing_rate_n", "swing_rate_e"][a]) {
+                let iv = self
+                    .m
+                    .states
+                    .iter()
+                    .position(|s| s == ["vn", "ve"][a])
+                    .unwrap();
+                let is = self
+                    .m
+                    .states
+                    .iter()
+                    .position(|s| s == ["swing_n", "swing_e"][a])
+                    .unwrap();
+                let rate = match self
+                    .m
+                    .states
+                    .iter()
+                    .position(|s| s == ["swing_rate_n", "swing_rate_e"][a])
+                {
                     Some(ir) => self.z[ir],
                     None => (self.z[is] - self.z[is + n]) / self.m.dt,
                 };
-                AxisState { v: self.z[iv], swing: self.z[is], swing_rate: rate }
+                AxisState {
+                    v: self.z[iv],
+                    swing: self.z[is],
+                    swing_rate: rate,
+                }
             })
             .collect()
     }
     fn step(&mut self, u: &[f64], dist: &[f64]) {
-        let ud: Vec<f64> = u.iter().zip(dist).zip(&self.m.input_mean).map(|((a, b), mu)| a + b - mu).collect();
+        let ud: Vec<f64> = u
+            .iter()
+            .zip(dist)
+            .zip(&self.m.input_mean)
+            .map(|((a, b), mu)| a + b - mu)
+            .collect();
         self.z = &self.m.a * &self.z + &self.m.b * DVector::from_vec(ud) + &self.m.c;
     }
 }
 
-fn run_linear(ctrl: &mut MpcController, plant: &mut LinearPlant, refs: &dyn Fn(usize) -> Vec<f64>, dist: &[f64], steps: usize) -> (Vec<Vec<f64>>, Vec<Vec<f64>>, Vec<TickKind>) {
+fn run_linear(
+    ctrl: &mut MpcController,
+    plant: &mut LinearPlant,
+    refs: &dyn Fn(usize) -> Vec<f64>,
+    dist: &[f64],
+    steps: usize,
+) -> (Vec<Vec<f64>>, Vec<Vec<f64>>, Vec<TickKind>) {
     let m = ctrl.axes();
     ctrl.reset(&plant.state(), &vec![0.0; m]);
     let mut u = vec![0.0; m];
@@ -226,16 +309,27 @@ fn mpc_tracks_a_step_without_offset_under_a_constant_input_disturbance() {
     for q in [1, 2, 5] {
         let m = model(0.2, 1.0, q);
         for dm in [DisturbanceModel::State, DisturbanceModel::Input] {
-            let s = MpcSettings { acc_max: None, disturbance: dm, ..Default::default() };
+            let s = MpcSettings {
+                acc_max: None,
+                disturbance: dm,
+                ..Default::default()
+            };
             let mut ctrl = MpcController::new(&m, s).unwrap();
             let mut plant = LinearPlant::new(&m);
             let refs = |k: usize| vec![if k > 10 { 2.0 } else { 0.0 }];
             let (_, vs, _) = run_linear(&mut ctrl, &mut plant, &refs, &[0.4], 1500);
             let v_end = vs.last().unwrap()[0];
-            assert!((v_end - 2.0).abs() < 1e-6, "q = {q}, {dm:?}: v_end = {v_end}");
+            assert!(
+                (v_end - 2.0).abs() < 1e-6,
+                "q = {q}, {dm:?}: v_end = {v_end}"
+            );
             if dm == DisturbanceModel::Input {
                 // The input disturbance is identified exactly.
-                assert!((ctrl.disturbance()[0] - 0.4).abs() < 1e-6, "d = {:?}", ctrl.disturbance());
+                assert!(
+                    (ctrl.disturbance()[0] - 0.4).abs() < 1e-6,
+                    "d = {:?}",
+                    ctrl.disturbance()
+                );
             }
         }
     }
@@ -246,9 +340,19 @@ fn velocity_only_disturbance_leaves_an_offset_for_an_input_disturbance() {
     // Why `state` is the default: the seed's velocity-row disturbance cannot explain an
     // input disturbance that also moves the swing row, so a steady offset remains.
     let m = model(0.2, 1.0, 2);
-    let s = MpcSettings { acc_max: None, disturbance: DisturbanceModel::Velocity, ..Default::default() };
+    let s = MpcSettings {
+        acc_max: None,
+        disturbance: DisturbanceModel::Velocity,
+        ..Default::default()
+    };
     let mut ctrl = MpcController::new(&m, s).unwrap();
-    let (_, vs, _) = run_linear(&mut ctrl, &mut LinearPlant::new(&m), &|_| vec![2.0], &[0.4], 1500);
+    let (_, vs, _) = run_linear(
+        &mut ctrl,
+        &mut LinearPlant::new(&m),
+        &|_| vec![2.0],
+        &[0.4],
+        1500,
+    );
     let v_end = vs.last().unwrap()[0];
     assert!((v_end - 2.0).abs() > 1e-4, "v_end = {v_end}");
     assert!((v_end - 2.0).abs() < 0.2, "v_end = {v_end}");
@@ -262,9 +366,18 @@ fn two_axis_mpc_tracks_both_axes_without_offset() {
     let mut ctrl = MpcController::new(&two, MpcSettings::default()).unwrap();
     assert_eq!(ctrl.axes(), 2);
     let mut plant = LinearPlant::new(&two);
-    let (_, vs, _) = run_linear(&mut ctrl, &mut plant, &|_| vec![1.0, -1.5], &[0.2, -0.3], 1500);
+    let (_, vs, _) = run_linear(
+        &mut ctrl,
+        &mut plant,
+        &|_| vec![1.0, -1.5],
+        &[0.2, -0.3],
+        1500,
+    );
     let v = vs.last().unwrap();
-    assert!((v[0] - 1.0).abs() < 1e-6 && (v[1] + 1.5).abs() < 1e-6, "{v:?}");
+    assert!(
+        (v[0] - 1.0).abs() < 1e-6 && (v[1] + 1.5).abs() < 1e-6,
+        "{v:?}"
+    );
 }
 
 fn stack_two_axes(one: &LinearModel) -> LinearModel {
@@ -301,8 +414,17 @@ fn stack_two_axes(one: &LinearModel) -> LinearModel {
 fn inactive_bounds_give_exactly_the_unconstrained_law() {
     let m = model(0.2, 1.0, 3);
     for solver in [QpSolverKind::Clarabel, QpSolverKind::ActiveSet] {
-        let free = MpcSettings { acc_max: None, jerk_max: None, ..Default::default() };
-        let loose = MpcSettings { acc_max: Some(50.0), jerk_max: Some(1e4), solver, ..Default::default() };
+        let free = MpcSettings {
+            acc_max: None,
+            jerk_max: None,
+            ..Default::default()
+        };
+        let loose = MpcSettings {
+            acc_max: Some(50.0),
+            jerk_max: Some(1e4),
+            solver,
+            ..Default::default()
+        };
         let mut c1 = MpcController::new(&m, free).unwrap();
         let mut c2 = MpcController::new(&m, loose).unwrap();
         let refs = |k: usize| vec![if k < 100 { 1.0 } else { -0.5 }];
@@ -321,20 +443,39 @@ fn active_bounds_are_respected_and_both_solvers_agree() {
     let dt = m.dt;
     let mut results = vec![];
     for solver in [QpSolverKind::Clarabel, QpSolverKind::ActiveSet] {
-        let s = MpcSettings { acc_max: Some(1.0), jerk_max: Some(10.0), solver, ..Default::default() };
+        let s = MpcSettings {
+            acc_max: Some(1.0),
+            jerk_max: Some(10.0),
+            solver,
+            ..Default::default()
+        };
         let mut c = MpcController::new(&m, s).unwrap();
-        let (us, vs, kinds) = run_linear(&mut c, &mut LinearPlant::new(&m), &|_| vec![3.0], &[0.0], 600);
-        assert!(kinds.iter().any(|k| *k == TickKind::Constrained), "bound never active");
+        let (us, vs, kinds) = run_linear(
+            &mut c,
+            &mut LinearPlant::new(&m),
+            &|_| vec![3.0],
+            &[0.0],
+            600,
+        );
+        assert!(kinds.contains(&TickKind::Constrained), "bound never active");
         let mut prev = 0.0;
         for u in &us {
             assert!(u[0].abs() <= 1.0 + 1e-6, "|u| = {}", u[0]);
-            assert!((u[0] - prev).abs() <= 10.0 * dt + 1e-6, "|Δu| = {}", (u[0] - prev).abs());
+            assert!(
+                (u[0] - prev).abs() <= 10.0 * dt + 1e-6,
+                "|Δu| = {}",
+                (u[0] - prev).abs()
+            );
             prev = u[0];
         }
         assert!((vs.last().unwrap()[0] - 3.0).abs() < 1e-3);
         results.push(us);
     }
-    let worst = results[0].iter().zip(&results[1]).map(|(a, b)| (a[0] - b[0]).abs()).fold(0.0, f64::max);
+    let worst = results[0]
+        .iter()
+        .zip(&results[1])
+        .map(|(a, b)| (a[0] - b[0]).abs())
+        .fold(0.0, f64::max);
     assert!(worst < 1e-5, "Clarabel and active set differ by {worst}");
 }
 
@@ -368,7 +509,15 @@ fn long_horizon_first_move_approaches_the_dlqr_gain() {
     let err = (&kmpc + &k).norm() / k.norm();
     assert!(err < 1e-6, "MPC first-move gain {kmpc} vs −K_dlqr {}", -&k);
     // A short horizon is measurably different (the test can fail).
-    let short = MpcController::new(&m, MpcSettings { horizon: 10, control_horizon: 10, ..ctrl.settings().clone() }).unwrap();
+    let short = MpcController::new(
+        &m,
+        MpcSettings {
+            horizon: 10,
+            control_horizon: 10,
+            ..ctrl.settings().clone()
+        },
+    )
+    .unwrap();
     let ks = short.condensed().k_xi.view((0, 0), (1, nz)).into_owned();
     assert!((&ks + &k).norm() / k.norm() > 1e-3);
 }
@@ -387,14 +536,23 @@ fn kalman_gain_solves_its_riccati_equation() {
     }
     let mut w = DMatrix::<f64>::zeros(nx, nx);
     for i in 0..nx {
-        w[(i, i)] = if i < nm { s.kf_process_noise.powi(2) } else { s.kf_disturbance_noise.powi(2) };
+        w[(i, i)] = if i < nm {
+            s.kf_process_noise.powi(2)
+        } else {
+            s.kf_disturbance_noise.powi(2)
+        };
     }
     let v = DMatrix::<f64>::identity(nm, nm) * s.kf_measurement_noise.powi(2);
     let p = kf.covariance();
     let a = &aug.a;
     let sinv = (&c * p * c.transpose() + &v).try_inverse().unwrap();
-    let res = a * p * a.transpose() - p - a * p * c.transpose() * &sinv * &c * p * a.transpose() + &w;
-    assert!(res.norm() / p.norm() < 1e-9, "filter DARE residual {}", res.norm());
+    let res =
+        a * p * a.transpose() - p - a * p * c.transpose() * &sinv * &c * p * a.transpose() + &w;
+    assert!(
+        res.norm() / p.norm() < 1e-9,
+        "filter DARE residual {}",
+        res.norm()
+    );
     let l = p * c.transpose() * &sinv;
     assert!((&l - kf.gain()).amax() < 1e-9);
     // Estimator error dynamics (I − LC)·A stable.
@@ -412,14 +570,33 @@ fn default_tuning_damps_the_swing_on_every_seed_payload() {
             let mut mpc = MpcController::new(&m, MpcSettings::default()).unwrap();
             let (vs, ss, _) = simulate_pendulum(p, &mut mpc, 2.0, 12.0, 0.0);
             // Without swing damping (swing-rate weight 0) for comparison.
-            let mut plain = MpcController::new(&m, MpcSettings { w_swing_rate: 0.0, ..Default::default() }).unwrap();
+            let mut plain = MpcController::new(
+                &m,
+                MpcSettings {
+                    w_swing_rate: 0.0,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
             let (_, ss0, _) = simulate_pendulum(p, &mut plain, 2.0, 12.0, 0.0);
             let iae = |s: &[f64]| s.iter().map(|x| x.abs()).sum::<f64>() * TS;
             let n = vs.len();
-            assert!((vs[n - 1] - 2.0).abs() < 0.02, "l {l} m_p {m_p}: v_end {}", vs[n - 1]);
-            assert!(iae(&ss) < iae(&ss0) / 3.0, "l {l} m_p {m_p}: IAE {} vs {}", iae(&ss), iae(&ss0));
+            assert!(
+                (vs[n - 1] - 2.0).abs() < 0.02,
+                "l {l} m_p {m_p}: v_end {}",
+                vs[n - 1]
+            );
+            assert!(
+                iae(&ss) < iae(&ss0) / 3.0,
+                "l {l} m_p {m_p}: IAE {} vs {}",
+                iae(&ss),
+                iae(&ss0)
+            );
             let tail_peak = ss[n - 100..].iter().map(|x| x.abs()).fold(0.0, f64::max);
-            assert!(tail_peak < 1f64.to_radians(), "l {l} m_p {m_p}: residual swing {tail_peak}");
+            assert!(
+                tail_peak < 1f64.to_radians(),
+                "l {l} m_p {m_p}: residual swing {tail_peak}"
+            );
         }
     }
 }
@@ -428,31 +605,69 @@ fn default_tuning_damps_the_swing_on_every_seed_payload() {
 fn bad_settings_and_models_are_errors_not_panics() {
     let m = model(0.2, 1.0, 2);
     for s in [
-        MpcSettings { horizon: 0, ..Default::default() },
-        MpcSettings { control_horizon: 200, horizon: 100, ..Default::default() },
-        MpcSettings { w_velocity: -1.0, ..Default::default() },
-        MpcSettings { w_acc: 0.0, w_acc_rate: 0.0, ..Default::default() },
-        MpcSettings { acc_max: Some(0.0), ..Default::default() },
-        MpcSettings { kf_measurement_noise: f64::NAN, ..Default::default() },
+        MpcSettings {
+            horizon: 0,
+            ..Default::default()
+        },
+        MpcSettings {
+            control_horizon: 200,
+            horizon: 100,
+            ..Default::default()
+        },
+        MpcSettings {
+            w_velocity: -1.0,
+            ..Default::default()
+        },
+        MpcSettings {
+            w_acc: 0.0,
+            w_acc_rate: 0.0,
+            ..Default::default()
+        },
+        MpcSettings {
+            acc_max: Some(0.0),
+            ..Default::default()
+        },
+        MpcSettings {
+            kf_measurement_noise: f64::NAN,
+            ..Default::default()
+        },
     ] {
-        assert!(matches!(MpcController::new(&m, s), Err(ControlError::Config(_))));
+        assert!(matches!(
+            MpcController::new(&m, s),
+            Err(ControlError::Config(_))
+        ));
     }
     let mut wrong_b = m.clone();
     wrong_b.b = DMatrix::zeros(3, 1);
-    assert!(matches!(MpcController::new(&wrong_b, MpcSettings::default()), Err(ControlError::Model(_))));
+    assert!(matches!(
+        MpcController::new(&wrong_b, MpcSettings::default()),
+        Err(ControlError::Model(_))
+    ));
     let mut wrong_state = m.clone();
     wrong_state.states = vec!["vd".into(), "swing_n".into()];
-    assert!(matches!(MpcController::new(&wrong_state, MpcSettings::default()), Err(ControlError::Model(_))));
+    assert!(matches!(
+        MpcController::new(&wrong_state, MpcSettings::default()),
+        Err(ControlError::Model(_))
+    ));
     let mut nan = m.clone();
     nan.a[(0, 0)] = f64::NAN;
-    assert!(matches!(MpcController::new(&nan, MpcSettings::default()), Err(ControlError::Model(_))));
+    assert!(matches!(
+        MpcController::new(&nan, MpcSettings::default()),
+        Err(ControlError::Model(_))
+    ));
     let mut unstable = m.clone();
     unstable.a[(0, 0)] = 3.0;
     assert!(MpcController::new(&unstable, MpcSettings::default()).is_err());
     let mut ctrl = MpcController::new(&m, MpcSettings::default()).unwrap();
     let mut out = [0.0];
-    assert!(matches!(ctrl.step(&[], &[1.0], &mut out), Err(ControlError::Input(_))));
-    assert!(matches!(ctrl.step(&[AxisState::default()], &[f64::INFINITY], &mut out), Err(ControlError::Input(_))));
+    assert!(matches!(
+        ctrl.step(&[], &[1.0], &mut out),
+        Err(ControlError::Input(_))
+    ));
+    assert!(matches!(
+        ctrl.step(&[AxisState::default()], &[f64::INFINITY], &mut out),
+        Err(ControlError::Input(_))
+    ));
     let json_err: Result<MpcSettings, _> = serde_json::from_str(r#"{"horizont": 10}"#);
     assert!(json_err.is_err());
 }
@@ -482,7 +697,10 @@ fn predicted_trajectory_matches_an_open_loop_rollout() {
         z[0] += m.dt * d;
         assert!((pred[3 * i] - z[0]).abs() < 1e-9, "v at {i}");
         assert!((pred[3 * i + 2] - z[1]).abs() < 1e-9, "swing at {i}");
-        assert!((pred[3 * i + 1] - (z[1] - prev_s) / m.dt).abs() < 1e-7, "rate at {i}");
+        assert!(
+            (pred[3 * i + 1] - (z[1] - prev_s) / m.dt).abs() < 1e-7,
+            "rate at {i}"
+        );
     }
 }
 
@@ -540,8 +758,22 @@ fn mpc_and_lqr_ticks_allocate_nothing() {
     assert!(counting::count(|| drop(std::hint::black_box(vec![1.0f64; 10]))) > 0);
     let m = model(0.3, 2.0, 4);
     for (s, must_constrain) in [
-        (MpcSettings { acc_max: None, ..Default::default() }, false),
-        (MpcSettings { acc_max: Some(1.0), jerk_max: Some(20.0), solver: QpSolverKind::ActiveSet, ..Default::default() }, true),
+        (
+            MpcSettings {
+                acc_max: None,
+                ..Default::default()
+            },
+            false,
+        ),
+        (
+            MpcSettings {
+                acc_max: Some(1.0),
+                jerk_max: Some(20.0),
+                solver: QpSolverKind::ActiveSet,
+                ..Default::default()
+            },
+            true,
+        ),
     ] {
         let mut ctrl = MpcController::new(&m, s).unwrap();
         let mut plant = LinearPlant::new(&m);
@@ -579,18 +811,56 @@ fn mpc_and_lqr_ticks_allocate_nothing() {
 fn tuning_report() {
     let sets: Vec<(&str, MpcSettings)> = vec![
         ("default", MpcSettings::default()),
-        ("sr1", MpcSettings { w_swing_rate: 1.0, ..Default::default() }),
-        ("sr3", MpcSettings { w_swing_rate: 3.0, ..Default::default() }),
-        ("sr2 du0.7", MpcSettings { w_acc_rate: 0.7, ..Default::default() }),
-        ("sr2 du1.5", MpcSettings { w_acc_rate: 1.5, ..Default::default() }),
-        ("sr2 Np70", MpcSettings { horizon: 70, ..Default::default() }),
+        (
+            "sr1",
+            MpcSettings {
+                w_swing_rate: 1.0,
+                ..Default::default()
+            },
+        ),
+        (
+            "sr3",
+            MpcSettings {
+                w_swing_rate: 3.0,
+                ..Default::default()
+            },
+        ),
+        (
+            "sr2 du0.7",
+            MpcSettings {
+                w_acc_rate: 0.7,
+                ..Default::default()
+            },
+        ),
+        (
+            "sr2 du1.5",
+            MpcSettings {
+                w_acc_rate: 1.5,
+                ..Default::default()
+            },
+        ),
+        (
+            "sr2 Np70",
+            MpcSettings {
+                horizon: 70,
+                ..Default::default()
+            },
+        ),
     ];
     let metrics = |vs: &[f64], ss: &[f64], dt: f64| {
         let peak = ss.iter().map(|x| x.abs()).fold(0.0, f64::max).to_degrees();
         let iae = ss.iter().map(|x| x.abs()).sum::<f64>() * dt * 57.2958;
-        let rise = vs.iter().position(|v| *v >= 1.8).map(|k| k as f64 * dt).unwrap_or(f64::NAN);
+        let rise = vs
+            .iter()
+            .position(|v| *v >= 1.8)
+            .map(|k| k as f64 * dt)
+            .unwrap_or(f64::NAN);
         let over = (vs.iter().cloned().fold(f64::MIN, f64::max) - 2.0) / 2.0 * 100.0;
-        let settle = ss.iter().rposition(|x| x.abs() > 1f64.to_radians()).map(|k| (k + 1) as f64 * dt).unwrap_or(0.0);
+        let settle = ss
+            .iter()
+            .rposition(|x| x.abs() > 1f64.to_radians())
+            .map(|k| (k + 1) as f64 * dt)
+            .unwrap_or(0.0);
         format!("peak {peak:5.1}°  IAE {iae:6.2}°s  rise90 {rise:5.2}s  overshoot {over:5.1}%  swing<1° after {settle:5.2}s")
     };
     for l in [0.5, 1.0, 2.0] {

@@ -8,7 +8,9 @@
 //! keys and bad values raise `swingrt.errors.ConfigError` naming the field.
 
 use nalgebra::{DMatrix, DVector};
-use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use numpy::{
+    PyArray1, PyArrayMethods, PyReadonlyArray2, PyReadonlyArrayDyn, PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use serde::Deserialize;
@@ -60,7 +62,9 @@ fn parse_model(text: &str) -> PyResult<LinearModel> {
         serde_json::from_str(text).map_err(|e| model_err(format!("model JSON: {e}")))?;
     if let Some(f) = &mj.format {
         if f != "swingrt-model/1" {
-            return Err(model_err(format!("unsupported model format {f:?} (expected \"swingrt-model/1\")")));
+            return Err(model_err(format!(
+                "unsupported model format {f:?} (expected \"swingrt-model/1\")"
+            )));
         }
     }
     let nz = mj.states.len() * mj.delays;
@@ -186,7 +190,11 @@ pub struct PyMpc {
 impl PyMpc {
     #[new]
     #[pyo3(signature = (model_json, settings=None))]
-    fn new(py: Python<'_>, model_json: &str, settings: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+    fn new(
+        py: Python<'_>,
+        model_json: &str,
+        settings: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
         let model = parse_model(model_json)?;
         let s: MpcSettings = settings_from(py, settings)?;
         let inner = py.detach(|| MpcController::new(&model, s)).map_err(to_py)?;
@@ -211,7 +219,11 @@ impl PyMpc {
 
     /// Restart from a measured state and acceleration setpoint (bumpless transfer).
     #[pyo3(signature = (state, acc=None))]
-    fn reset(&mut self, state: PyReadonlyArrayDyn<'_, f64>, acc: Option<&Bound<'_, PyAny>>) -> PyResult<()> {
+    fn reset(
+        &mut self,
+        state: PyReadonlyArrayDyn<'_, f64>,
+        acc: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
         reset_any(&mut self.inner, &state, acc)
     }
 
@@ -300,7 +312,11 @@ impl PyLqr {
 
     /// Restart from a measured state and acceleration setpoint (bumpless transfer).
     #[pyo3(signature = (state, acc=None))]
-    fn reset(&mut self, state: PyReadonlyArrayDyn<'_, f64>, acc: Option<&Bound<'_, PyAny>>) -> PyResult<()> {
+    fn reset(
+        &mut self,
+        state: PyReadonlyArrayDyn<'_, f64>,
+        acc: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
         reset_any(&mut self.inner, &state, acc)
     }
 
@@ -327,7 +343,9 @@ fn to_dmatrix(name: &str, a: &PyReadonlyArray2<'_, f64>) -> PyResult<DMatrix<f64
     let view = a.as_array();
     let m = DMatrix::from_fn(shape[0], shape[1], |i, j| view[[i, j]]);
     if m.iter().any(|x| !x.is_finite()) {
-        return Err(to_py(ControlError::Input(format!("{name} has a non-finite entry"))));
+        return Err(to_py(ControlError::Input(format!(
+            "{name} has a non-finite entry"
+        ))));
     }
     Ok(m)
 }
@@ -435,7 +453,9 @@ fn pendulum_model_json(
     let p = PendulumParams { m_q, m_p, l, c };
     let m = lqr::pendulum_delay_model(&p, dt, delays, axes, seed).map_err(to_py)?;
     let rows = |x: &DMatrix<f64>| -> Vec<Vec<f64>> {
-        (0..x.nrows()).map(|i| x.row(i).iter().copied().collect()).collect()
+        (0..x.nrows())
+            .map(|i| x.row(i).iter().copied().collect())
+            .collect()
     };
     let v = serde_json::json!({
         "format": "swingrt-model/1",

@@ -82,16 +82,32 @@ fn check_dims(
     let m = b.ncols();
     let bad = |w: &str| Err(ControlError::Model(format!("Riccati: {w}")));
     if n == 0 || a.ncols() != n {
-        return bad(&format!("A must be square and non-empty (got {}×{})", a.nrows(), a.ncols()));
+        return bad(&format!(
+            "A must be square and non-empty (got {}×{})",
+            a.nrows(),
+            a.ncols()
+        ));
     }
     if b.nrows() != n || m == 0 {
-        return bad(&format!("B must be {n}×m with m ≥ 1 (got {}×{})", b.nrows(), b.ncols()));
+        return bad(&format!(
+            "B must be {n}×m with m ≥ 1 (got {}×{})",
+            b.nrows(),
+            b.ncols()
+        ));
     }
     if q.nrows() != n || q.ncols() != n {
-        return bad(&format!("Q must be {n}×{n} (got {}×{})", q.nrows(), q.ncols()));
+        return bad(&format!(
+            "Q must be {n}×{n} (got {}×{})",
+            q.nrows(),
+            q.ncols()
+        ));
     }
     if r.nrows() != m || r.ncols() != m {
-        return bad(&format!("R must be {m}×{m} (got {}×{})", r.nrows(), r.ncols()));
+        return bad(&format!(
+            "R must be {m}×{m} (got {}×{})",
+            r.nrows(),
+            r.ncols()
+        ));
     }
     for (name, mat) in [("A", a), ("B", b), ("Q", q), ("R", r)] {
         if mat.iter().any(|x| !x.is_finite()) {
@@ -178,8 +194,9 @@ pub fn care(
     symmetrize(&mut p);
     let k = &rinv * b.transpose() * &p;
     let res = a.transpose() * &p + &p * a - &p * &g * &p + q;
-    let residual = res.norm() / (1.0 + q.norm() + 2.0 * (a.norm() * p.norm()) + (&p * &g * &p).norm());
-    if !(residual <= RESIDUAL_TOL) {
+    let residual =
+        res.norm() / (1.0 + q.norm() + 2.0 * (a.norm() * p.norm()) + (&p * &g * &p).norm());
+    if residual.is_nan() || residual > RESIDUAL_TOL {
         return Err(ControlError::Synthesis(format!(
             "CARE residual {residual:.3e} exceeds {RESIDUAL_TOL:.0e}"
         )));
@@ -283,7 +300,7 @@ pub fn dare_with_cross(
     // Residual of the original (cross-term) equation.
     let res = a.transpose() * &p * a - &p - (a.transpose() * &p * b + cross) * &k + q;
     let residual = res.norm() / (1.0 + q.norm() + p.norm() * (1.0 + a.norm() * a.norm()));
-    if !(residual <= RESIDUAL_TOL) {
+    if residual.is_nan() || residual > RESIDUAL_TOL {
         return Err(ControlError::Synthesis(format!(
             "DARE residual {residual:.3e} exceeds {RESIDUAL_TOL:.0e}"
         )));
@@ -329,7 +346,9 @@ pub fn sampled_lqr(
 ) -> Result<(RiccatiSolution, DMatrix<f64>, DMatrix<f64>), ControlError> {
     check_dims(a, b, q, r)?;
     if !(dt.is_finite() && dt > 0.0) {
-        return Err(ControlError::Model(format!("sampled LQR: period must be > 0 (got {dt})")));
+        return Err(ControlError::Model(format!(
+            "sampled LQR: period must be > 0 (got {dt})"
+        )));
     }
     let n = a.nrows();
     let m = b.ncols();
@@ -431,7 +450,12 @@ impl PendulumParams {
     /// by least squares to a seeded random-step simulation of the exact ZOH discretisation
     /// of [`Self::continuous_model`]: the physical dynamics fill the top n rows of A, exact
     /// shifts the rows below (the structure DMDc produces). For tests and benchmarks.
-    pub fn delay_model(&self, dt: f64, delays: usize, seed: u64) -> Result<LinearModel, ControlError> {
+    pub fn delay_model(
+        &self,
+        dt: f64,
+        delays: usize,
+        seed: u64,
+    ) -> Result<LinearModel, ControlError> {
         self.validate()?;
         if !(dt.is_finite() && dt > 0.0) || delays == 0 {
             return Err(ControlError::Model(format!(
@@ -482,12 +506,14 @@ impl PendulumParams {
             .map_err(|e| ControlError::Model(format!("delay model fit: {e}")))?;
         let top = sol.transpose(); // n × (nz + 1)
         let mut a = DMatrix::<f64>::zeros(nz, nz);
-        a.view_mut((0, 0), (n, nz)).copy_from(&top.view((0, 0), (n, nz)));
+        a.view_mut((0, 0), (n, nz))
+            .copy_from(&top.view((0, 0), (n, nz)));
         for i in n..nz {
             a[(i, i - n)] = 1.0;
         }
         let mut b = DMatrix::<f64>::zeros(nz, 1);
-        b.view_mut((0, 0), (n, 1)).copy_from(&top.view((0, nz), (n, 1)));
+        b.view_mut((0, 0), (n, 1))
+            .copy_from(&top.view((0, nz), (n, 1)));
         Ok(LinearModel {
             method: "whitebox".into(),
             dt,
@@ -540,7 +566,9 @@ pub fn pendulum_delay_model(
                 ..one
             })
         }
-        _ => Err(ControlError::Model(format!("axes must be 1 or 2 (got {axes})"))),
+        _ => Err(ControlError::Model(format!(
+            "axes must be 1 or 2 (got {axes})"
+        ))),
     }
 }
 
@@ -617,7 +645,11 @@ pub struct LqrController {
 
 impl LqrController {
     /// Synthesise the sampled-data LQR for `params` on `axes` (1 or 2) axes.
-    pub fn new(params: PendulumParams, axes: usize, settings: LqrSettings) -> Result<Self, ControlError> {
+    pub fn new(
+        params: PendulumParams,
+        axes: usize,
+        settings: LqrSettings,
+    ) -> Result<Self, ControlError> {
         params.validate()?;
         settings.validate()?;
         if !(1..=2).contains(&axes) {
@@ -659,7 +691,12 @@ impl LqrController {
     }
 }
 
-fn check_inputs(axes: usize, state: &[AxisState], other: &[f64], what: &str) -> Result<(), ControlError> {
+fn check_inputs(
+    axes: usize,
+    state: &[AxisState],
+    other: &[f64],
+    what: &str,
+) -> Result<(), ControlError> {
     if state.len() != axes || other.len() != axes {
         return Err(ControlError::Input(format!(
             "expected {axes} axis state(s) and {axes} {what} value(s), got {} and {}",
@@ -669,7 +706,9 @@ fn check_inputs(axes: usize, state: &[AxisState], other: &[f64], what: &str) -> 
     }
     for (i, s) in state.iter().enumerate() {
         if !(s.v.is_finite() && s.swing.is_finite() && s.swing_rate.is_finite()) {
-            return Err(ControlError::Input(format!("axis {i} state is not finite: {s:?}")));
+            return Err(ControlError::Input(format!(
+                "axis {i} state is not finite: {s:?}"
+            )));
         }
     }
     if let Some(i) = other.iter().position(|x| !x.is_finite()) {
@@ -773,7 +812,11 @@ mod tests {
         // p = a²p r/(r + b²p) + q ⇔ b²p² + (r − a²r − q b²)p − q r = 0.
         let (qa, qb, qc) = (b * b, r - a * a * r - q * b * b, -q * r);
         let p = (-qb + (qb * qb - 4.0 * qa * qc).sqrt()) / (2.0 * qa);
-        assert!((sol.p[(0, 0)] - p).abs() < 1e-10 * p, "{} vs {p}", sol.p[(0, 0)]);
+        assert!(
+            (sol.p[(0, 0)] - p).abs() < 1e-10 * p,
+            "{} vs {p}",
+            sol.p[(0, 0)]
+        );
         assert!((sol.k[(0, 0)] - a * b * p / (r + b * b * p)).abs() < 1e-10);
     }
 
@@ -784,10 +827,19 @@ mod tests {
         let b = DMatrix::from_row_slice(2, 1, &[0.0, 1.0]);
         let q = DMatrix::identity(2, 2);
         let r = DMatrix::identity(1, 1);
-        assert!(matches!(dare(&a, &b, &q, &r), Err(ControlError::Synthesis(_))));
+        assert!(matches!(
+            dare(&a, &b, &q, &r),
+            Err(ControlError::Synthesis(_))
+        ));
         let ac = DMatrix::from_row_slice(2, 2, &[0.5, 0.0, 0.0, -1.0]);
-        assert!(matches!(care(&ac, &b, &q, &r), Err(ControlError::Synthesis(_))));
+        assert!(matches!(
+            care(&ac, &b, &q, &r),
+            Err(ControlError::Synthesis(_))
+        ));
         let bad_r = DMatrix::from_element(1, 1, -1.0);
-        assert!(matches!(dare(&a, &b, &q, &bad_r), Err(ControlError::Model(_))));
+        assert!(matches!(
+            dare(&a, &b, &q, &bad_r),
+            Err(ControlError::Model(_))
+        ));
     }
 }

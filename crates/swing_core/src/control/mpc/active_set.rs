@@ -43,7 +43,12 @@ pub struct ActiveSetQp {
 
 impl ActiveSetQp {
     /// Factor H and lay out the constraints.
-    pub fn new(h: &DMatrix<f64>, bounds: Bounds, m: usize, nc: usize) -> Result<Self, ControlError> {
+    pub fn new(
+        h: &DMatrix<f64>,
+        bounds: Bounds,
+        m: usize,
+        nc: usize,
+    ) -> Result<Self, ControlError> {
         let n = h.nrows();
         let chol = h.clone().cholesky().ok_or_else(|| {
             ControlError::Synthesis("active set: Hessian not positive definite".into())
@@ -51,7 +56,9 @@ impl ActiveSetQp {
         let l = chol.l();
         let linv = l
             .solve_lower_triangular(&DMatrix::<f64>::identity(n, n))
-            .ok_or_else(|| ControlError::Synthesis("active set: singular Cholesky factor".into()))?;
+            .ok_or_else(|| {
+                ControlError::Synthesis("active set: singular Cholesky factor".into())
+            })?;
         let j0 = linv.transpose();
         let g = constraint_rows(&bounds, m, nc);
         let mut rows = Vec::with_capacity(g.nrows());

@@ -19,8 +19,10 @@
 //!
 //! **Cost** (eq. 5.28–5.31, the MPC Toolbox form the seed uses), decision U = [u₀ … u_{Nc−1}],
 //! u_j = u_{Nc−1} for j ≥ Nc (eq. 5.22):
+//! ```text
 //! J = Σ_{i=1}^{Np} ‖W_y (r_{k+i} − y_{k+i})‖² + Σ_{i=0}^{Np−1} ‖W_u (u_{k+i} − u_ss)‖²
 //!   + Σ_{i=0}^{Nc−1} ‖W_Δu (u_{k+i} − u_{k+i−1})‖²,
+//! ```
 //! with references v_ref (held over the horizon), ṡ_ref = 0, s_ref = s_ss and input target
 //! u_ss, where (z_ss, u_ss) is the steady state of the augmented model with v = v_ref at the
 //! current disturbance estimate (target calculation; it keeps an input weight from
@@ -202,7 +204,8 @@ fn targets(aug: &Augmented, iv: &[usize], is: &[usize]) -> Result<Targets, Contr
     let mut lhs = DMatrix::<f64>::zeros(dim, dim);
     lhs.view_mut((0, 0), (nm, nm))
         .copy_from(&(DMatrix::<f64>::identity(nm, nm) - aug.a.view((0, 0), (nm, nm))));
-    lhs.view_mut((0, nm), (nm, m)).copy_from(&(-aug.b.view((0, 0), (nm, m))));
+    lhs.view_mut((0, nm), (nm, m))
+        .copy_from(&(-aug.b.view((0, 0), (nm, m))));
     for i in 0..m {
         lhs[(nm + i, iv[i])] = 1.0;
     }
@@ -213,8 +216,10 @@ fn targets(aug: &Augmented, iv: &[usize], is: &[usize]) -> Result<Targets, Contr
     for i in 0..m {
         rhs[(nm + i, i)] = 1.0;
     }
-    rhs.view_mut((0, m), (nm, nd)).copy_from(&aug.a.view((0, nm), (nm, nd)));
-    rhs.view_mut((0, m + nd), (nm, 1)).copy_from(&aug.c.rows(0, nm));
+    rhs.view_mut((0, m), (nm, nd))
+        .copy_from(&aug.a.view((0, nm), (nm, nd)));
+    rhs.view_mut((0, m + nd), (nm, 1))
+        .copy_from(&aug.c.rows(0, nm));
     let sol = lu.solve(&rhs).ok_or_else(|| {
         ControlError::Model(
             "no steady state with v = v_ref (the model has a zero at z = 1); \
@@ -318,7 +323,11 @@ pub fn condense(
     }
     let mut h = &gq * &gamma;
     for j in 0..nc {
-        let count = if j + 1 < nc { 1.0 } else { (np - nc + 1) as f64 };
+        let count = if j + 1 < nc {
+            1.0
+        } else {
+            (np - nc + 1) as f64
+        };
         for a in 0..m {
             let d = j * m + a;
             h[(d, d)] += ru * count;
@@ -368,7 +377,11 @@ pub fn condense(
         }
         let mut g_u = DMatrix::<f64>::zeros(nu, m); // MᵀR M_u
         for j in 0..nc {
-            let count = if j + 1 < nc { 1.0 } else { (np - nc + 1) as f64 };
+            let count = if j + 1 < nc {
+                1.0
+            } else {
+                (np - nc + 1) as f64
+            };
             for a in 0..m {
                 g_u[(j * m + a, a)] = ru * count;
             }

@@ -61,7 +61,11 @@ impl SteadyStateKalman {
         // L = P Cᵀ S⁻¹ ⇔ S Lᵀ = C P (S symmetric).
         let lt = s
             .cholesky()
-            .ok_or_else(|| ControlError::Synthesis("Kalman filter: innovation covariance not positive definite".into()))?
+            .ok_or_else(|| {
+                ControlError::Synthesis(
+                    "Kalman filter: innovation covariance not positive definite".into(),
+                )
+            })?
             .solve(&pct.transpose());
         let gain = lt.transpose();
         Ok(Self {

@@ -208,14 +208,19 @@ fn check_model(model: &LinearModel) -> Result<(usize, usize, usize), ControlErro
     let q = model.delays;
     let m = model.inputs.len();
     if n == 0 || q == 0 {
-        return bad(format!("model needs ≥ 1 state and delays ≥ 1 (got {n} states, q = {q})"));
+        return bad(format!(
+            "model needs ≥ 1 state and delays ≥ 1 (got {n} states, q = {q})"
+        ));
     }
     if !(1..=2).contains(&m) {
         return bad(format!("model must have 1 or 2 inputs (axes), got {m}"));
     }
     let nz = n * q;
     if model.a.shape() != (nz, nz) {
-        return bad(format!("A must be {nz}×{nz} (states × delays), got {:?}", model.a.shape()));
+        return bad(format!(
+            "A must be {nz}×{nz} (states × delays), got {:?}",
+            model.a.shape()
+        ));
     }
     if model.b.shape() != (nz, m) {
         return bad(format!("B must be {nz}×{m}, got {:?}", model.b.shape()));
@@ -224,7 +229,10 @@ fn check_model(model: &LinearModel) -> Result<(usize, usize, usize), ControlErro
         return bad(format!("c must have {nz} entries, got {}", model.c.len()));
     }
     if model.input_mean.len() != m {
-        return bad(format!("input_mean must have {m} entries, got {}", model.input_mean.len()));
+        return bad(format!(
+            "input_mean must have {m} entries, got {}",
+            model.input_mean.len()
+        ));
     }
     if !(model.dt.is_finite() && model.dt > 0.0) {
         return bad(format!("dt must be > 0 (got {})", model.dt));
@@ -265,9 +273,9 @@ impl MpcController {
                 Some(src) => sources.push(src),
                 None => {
                     return Err(ControlError::Model(format!(
-                        "model state '{name}' is not one the controller measures on axes {suffixes:?} \
+                    "model state '{name}' is not one the controller measures on axes {suffixes:?} \
                          (expected v<axis>, swing_<axis> or swing_rate_<axis>)"
-                    )))
+                )))
                 }
             }
         }
@@ -309,7 +317,14 @@ impl MpcController {
             u: settings.w_acc,
             du: settings.w_acc_rate,
         };
-        let cond = condense(&aug, &iv, &is, weights, settings.horizon, settings.control_horizon)?;
+        let cond = condense(
+            &aug,
+            &iv,
+            &is,
+            weights,
+            settings.horizon,
+            settings.control_horizon,
+        )?;
         let mut w = DMatrix::<f64>::zeros(nx, nx);
         for i in 0..nx {
             w[(i, i)] = if i < nm {
@@ -437,7 +452,9 @@ impl MpcController {
         }
         for (i, s) in state.iter().enumerate() {
             if !(s.v.is_finite() && s.swing.is_finite() && s.swing_rate.is_finite()) {
-                return Err(ControlError::Input(format!("axis {i} state is not finite: {s:?}")));
+                return Err(ControlError::Input(format!(
+                    "axis {i} state is not finite: {s:?}"
+                )));
             }
         }
         if let Some(i) = vel_ref.iter().position(|x| !x.is_finite()) {
@@ -535,13 +552,12 @@ impl SwingController for MpcController {
         } else {
             self.u_sol.copy_from(&self.u_unc);
         }
-        let m = self.m;
-        for a in 0..m {
+        for (a, out) in acc_out.iter_mut().enumerate() {
             let u = self.u_sol[a];
             if !u.is_finite() {
                 return Err(ControlError::Solver("non-finite input from the QP".into()));
             }
-            acc_out[a] = u;
+            *out = u;
             self.u_prev[a] = u;
         }
         self.kf.predict(&self.u_prev);

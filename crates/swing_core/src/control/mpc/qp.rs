@@ -12,9 +12,7 @@
 //!   Cholesky factor of H, started from the unconstrained minimiser the law already gives.
 
 use clarabel::algebra::CscMatrix;
-use clarabel::solver::{
-    DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
-};
+use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 use nalgebra::DMatrix;
 
 use crate::control::ControlError;
@@ -139,7 +137,12 @@ impl std::fmt::Debug for ClarabelQp {
 
 impl ClarabelQp {
     /// Build the solver for Hessian `h` and the given bounds.
-    pub fn new(h: &DMatrix<f64>, bounds: Bounds, m: usize, nc: usize) -> Result<Self, ControlError> {
+    pub fn new(
+        h: &DMatrix<f64>,
+        bounds: Bounds,
+        m: usize,
+        nc: usize,
+    ) -> Result<Self, ControlError> {
         let g = constraint_rows(&bounds, m, nc);
         let ncon = g.nrows();
         let p = to_csc(h, true);
@@ -174,7 +177,12 @@ impl ClarabelQp {
 
     /// Solve for gradient `f` and previous input `u_prev`; the minimiser goes to `out`.
     /// Returns the iteration count.
-    pub fn solve(&mut self, f: &[f64], u_prev: &[f64], out: &mut [f64]) -> Result<u32, ControlError> {
+    pub fn solve(
+        &mut self,
+        f: &[f64],
+        u_prev: &[f64],
+        out: &mut [f64],
+    ) -> Result<u32, ControlError> {
         self.q.copy_from_slice(f);
         fill_rhs(&self.bounds, self.m, self.nc, u_prev, &mut self.b);
         self.solver
@@ -190,13 +198,13 @@ impl ClarabelQp {
                 out.copy_from_slice(&sol.x);
                 Ok(sol.iterations)
             }
-            SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => Err(
-                ControlError::Solver(
+            SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => {
+                Err(ControlError::Solver(
                     "QP infeasible: the previous acceleration is outside acc_max by more than \
                      one tick of jerk_max"
                         .into(),
-                ),
-            ),
+                ))
+            }
             s => Err(ControlError::Solver(format!("Clarabel stopped: {s:?}"))),
         }
     }

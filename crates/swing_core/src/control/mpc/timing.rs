@@ -70,7 +70,11 @@ pub fn tick_timing(
                 "constrained timing: the bounds were (almost) never active".into(),
             ));
         }
-        let sign = if (k / half_period) % 2 == 0 { 1.0 } else { -1.0 };
+        let sign = if (k / half_period) % 2 == 0 {
+            1.0
+        } else {
+            -1.0
+        };
         for (a, r) in refs.iter_mut().enumerate() {
             *r = sign * amplitude * if a == 0 { 1.0 } else { -0.7 };
         }
