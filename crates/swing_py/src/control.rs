@@ -51,7 +51,9 @@ fn model_err(msg: impl Into<String>) -> PyErr {
 
 fn matrix(name: &str, rows: &[Vec<f64>], nr: usize, nc: usize) -> PyResult<DMatrix<f64>> {
     if rows.len() != nr || rows.iter().any(|r| r.len() != nc) {
-        return Err(model_err(format!("model {name} must be {nr}×{nc}")));
+        return Err(model_err(format!(
+            "{name} must be {nr}×{nc} (states × delays = {nr})"
+        )));
     }
     Ok(DMatrix::from_fn(nr, nc, |i, j| rows[i][j]))
 }
@@ -59,7 +61,7 @@ fn matrix(name: &str, rows: &[Vec<f64>], nr: usize, nc: usize) -> PyResult<DMatr
 /// Parse a `swingrt-model/1` JSON text into a [`LinearModel`].
 fn parse_model(text: &str) -> PyResult<LinearModel> {
     let mj: ModelJson =
-        serde_json::from_str(text).map_err(|e| model_err(format!("model JSON: {e}")))?;
+        serde_json::from_str(text).map_err(|e| model_err(format!("swingrt-model/1 JSON: {e}")))?;
     if let Some(f) = &mj.format {
         if f != "swingrt-model/1" {
             return Err(model_err(format!(
@@ -73,7 +75,7 @@ fn parse_model(text: &str) -> PyResult<LinearModel> {
     let b = matrix("B", &mj.b, nz, m)?;
     let c = mj.c.unwrap_or_else(|| vec![0.0; nz]);
     if c.len() != nz {
-        return Err(model_err(format!("model c must have {nz} entries")));
+        return Err(model_err(format!("c must have {nz} entries")));
     }
     Ok(LinearModel {
         method: mj.method,
