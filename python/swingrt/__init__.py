@@ -9,5 +9,18 @@ from __future__ import annotations
 
 from swingrt import errors
 from swingrt._core import __version__
+from swingrt.metrics import step_metrics
+from swingrt.scenario import resolve as resolve_scenario
+from swingrt.sim import Simulator, collect, simulate
+from swingrt.trace import Trace
 
-__all__ = ["__version__", "errors"]
+__all__ = [
+    "__version__",
+    "errors",
+    "Simulator",
+    "Trace",
+    "collect",
+    "resolve_scenario",
+    "simulate",
+    "step_metrics",
+]

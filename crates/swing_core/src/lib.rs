@@ -6,6 +6,9 @@
 //! no Python; the PyO3 binding lives in the `swing_py` crate. Equation numbers refer to the
 //! thesis in `shared/seed/thesis.txt`.
 
+// Index loops mirror the equations (x_i, T_i, n_i) and read better than iterator chains here.
+#![allow(clippy::needless_range_loop)]
+
 pub mod config;
 pub mod control;
 pub mod error;

@@ -1,13 +1,11 @@
 //! Bindings of `swing_core::control`: the MPC and LQR controllers, the Riccati solvers and
 //! the MPC tick timing used by `swingrt bench`.
 //!
-//! Model JSON (`swingrt-model/1`, DESIGN §7) is parsed here into a
-//! [`swing_core::sysid::LinearModel`] (fields `A`, `B`, `c`, `input_mean`, `delays`, `dt`,
-//! `states`, `inputs`; the rest is optional), until the core offers its own reader.
+//! Model JSON (`swingrt-model/1`, DESIGN §7) is read by `LinearModel::from_json`.
 //! Settings dicts are turned into JSON and read by the core's serde structs, so unknown
 //! keys and bad values raise `swingrt.errors.ConfigError` naming the field.
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 use numpy::{
     PyArray1, PyArrayMethods, PyReadonlyArray2, PyReadonlyArrayDyn, PyUntypedArrayMethods,
 };
@@ -18,78 +16,14 @@ use swing_core::control::lqr::{self, LqrController, LqrSettings, PendulumParams}
 use swing_core::control::mpc::timing::tick_timing;
 use swing_core::control::mpc::{MpcController, MpcSettings};
 use swing_core::control::{AxisState, ControlError, SwingController, TickInfo, TickKind};
-use swing_core::sysid::{LinearModel, Offset};
+use swing_core::sysid::LinearModel;
 use swing_core::ConfigError;
 
 use crate::errors::to_py;
 
-/// The subset of the model file the controllers need.
-#[derive(Deserialize)]
-struct ModelJson {
-    format: Option<String>,
-    #[serde(default)]
-    method: String,
-    dt: f64,
-    delays: usize,
-    #[serde(default)]
-    rank: usize,
-    states: Vec<String>,
-    inputs: Vec<String>,
-    #[serde(default)]
-    offset: Offset,
-    input_mean: Option<Vec<f64>>,
-    #[serde(rename = "A")]
-    a: Vec<Vec<f64>>,
-    #[serde(rename = "B")]
-    b: Vec<Vec<f64>>,
-    c: Option<Vec<f64>>,
-}
-
-fn model_err(msg: impl Into<String>) -> PyErr {
-    to_py(ControlError::Model(msg.into()))
-}
-
-fn matrix(name: &str, rows: &[Vec<f64>], nr: usize, nc: usize) -> PyResult<DMatrix<f64>> {
-    if rows.len() != nr || rows.iter().any(|r| r.len() != nc) {
-        return Err(model_err(format!(
-            "{name} must be {nr}×{nc} (states × delays = {nr})"
-        )));
-    }
-    Ok(DMatrix::from_fn(nr, nc, |i, j| rows[i][j]))
-}
-
-/// Parse a `swingrt-model/1` JSON text into a [`LinearModel`].
+/// Parse a `swingrt-model/1` JSON text with the core's reader.
 fn parse_model(text: &str) -> PyResult<LinearModel> {
-    let mj: ModelJson =
-        serde_json::from_str(text).map_err(|e| model_err(format!("swingrt-model/1 JSON: {e}")))?;
-    if let Some(f) = &mj.format {
-        if f != "swingrt-model/1" {
-            return Err(model_err(format!(
-                "unsupported model format {f:?} (expected \"swingrt-model/1\")"
-            )));
-        }
-    }
-    let nz = mj.states.len() * mj.delays;
-    let m = mj.inputs.len();
-    let a = matrix("A", &mj.a, nz, nz)?;
-    let b = matrix("B", &mj.b, nz, m)?;
-    let c = mj.c.unwrap_or_else(|| vec![0.0; nz]);
-    if c.len() != nz {
-        return Err(model_err(format!("c must have {nz} entries")));
-    }
-    Ok(LinearModel {
-        method: mj.method,
-        dt: mj.dt,
-        delays: mj.delays,
-        rank: mj.rank,
-        states: mj.states,
-        inputs: mj.inputs,
-        offset: mj.offset,
-        input_mean: mj.input_mean.unwrap_or_else(|| vec![0.0; m]),
-        a,
-        b,
-        c: DVector::from_vec(c),
-    })
+    LinearModel::from_json(text).map_err(to_py)
 }
 
 /// A settings dict (or None) → settings struct through JSON and serde.
@@ -454,26 +388,7 @@ fn pendulum_model_json(
 ) -> PyResult<String> {
     let p = PendulumParams { m_q, m_p, l, c };
     let m = lqr::pendulum_delay_model(&p, dt, delays, axes, seed).map_err(to_py)?;
-    let rows = |x: &DMatrix<f64>| -> Vec<Vec<f64>> {
-        (0..x.nrows())
-            .map(|i| x.row(i).iter().copied().collect())
-            .collect()
-    };
-    let v = serde_json::json!({
-        "format": "swingrt-model/1",
-        "method": m.method,
-        "dt": m.dt,
-        "delays": m.delays,
-        "rank": m.rank,
-        "states": m.states,
-        "inputs": m.inputs,
-        "offset": "none",
-        "input_mean": m.input_mean,
-        "A": rows(&m.a),
-        "B": rows(&m.b),
-        "c": m.c.iter().copied().collect::<Vec<f64>>(),
-    });
-    Ok(v.to_string())
+    m.to_json().map_err(to_py)
 }
 
 /// Register this domain's functions and classes on the module.

@@ -526,6 +526,8 @@ impl PendulumParams {
             a,
             b,
             c: DVector::zeros(nz),
+            fingerprint: String::new(),
+            diagnostics: Default::default(),
         })
     }
 }

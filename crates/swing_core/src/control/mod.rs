@@ -95,4 +95,9 @@ pub trait SwingController: Send {
         vel_ref: &[f64],
         acc_out: &mut [f64],
     ) -> Result<TickInfo, ControlError>;
+    /// Predicted outputs of the last tick for plots (MPC: Np × axes × [v, swing rate,
+    /// swing]); `None` for controllers that do not predict. Not for the real-time path.
+    fn prediction(&mut self) -> Option<Vec<f64>> {
+        None
+    }
 }

@@ -220,6 +220,11 @@ impl Simulator {
         Ok(())
     }
 
+    /// Predicted outputs of the attached controller's last tick, if it predicts.
+    pub fn controller_prediction(&mut self) -> Option<Vec<f64>> {
+        self.attached.as_mut().and_then(|a| a.ctrl.prediction())
+    }
+
     /// Switch idealised effects (drag, friction, rotors) for experiments.
     pub fn set_effects(&mut self, fx: Effects) {
         self.fx = fx;

@@ -3,9 +3,17 @@
 //! For every method (DESIGN §7) the model acts on the stacked state
 //! z_k = [x_k; x_{k-1}; …; x_{k-q+1}] (newest first) as
 //! z_{k+1} = A z_k + B (u_k − input_mean) + c.
+//!
+//! The JSON form (`"format": "swingrt-model/1"`) stores `A`, `B` as nested row lists and
+//! `c`, `input_mean` as lists, with the training-data `fingerprint` and `diagnostics`.
 
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
+
+use super::error::{model, SysidError};
+
+/// The schema tag of a model file.
+pub const MODEL_FORMAT: &str = "swingrt-model/1";
 
 /// How the constant offset of the input channel is handled (thesis 4.6.6).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -18,6 +26,67 @@ pub enum Offset {
     /// Learn a constant column `c` (default; predicts better on held-out data).
     #[default]
     Affine,
+}
+
+impl Offset {
+    /// Parse `none`, `mean` or `affine`.
+    pub fn parse(s: &str) -> Result<Self, SysidError> {
+        match s {
+            "none" => Ok(Offset::None),
+            "mean" => Ok(Offset::Mean),
+            "affine" => Ok(Offset::Affine),
+            other => Err(super::error::config(format!(
+                "offset must be none, mean or affine, not {other:?}"
+            ))),
+        }
+    }
+
+    /// The lowercase name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Offset::None => "none",
+            Offset::Mean => "mean",
+            Offset::Affine => "affine",
+        }
+    }
+}
+
+/// White-box parameter estimates (thesis 4.3), reported in a model's diagnostics.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct WhiteboxEstimates {
+    /// Vehicle mass m_Q [kg] (known).
+    pub vehicle_mass: f64,
+    /// Payload mass m_p [kg] (RLS on hover thrust, or given).
+    pub payload_mass: f64,
+    /// Cable length l [m] (from the FFT peak, eq. 4.8, or given).
+    pub length: f64,
+    /// Measured swing frequency [Hz] (FFT peak), if the length was estimated.
+    pub frequency_hz: Option<f64>,
+    /// Joint friction coefficient c of eq. 5.7 [N·m·s/rad].
+    pub friction: f64,
+}
+
+/// Diagnostics stored with a model.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Diagnostics {
+    /// Singular values of the regression matrix (Ω for DMDc, Π for HAVOKc), descending.
+    #[serde(default)]
+    pub singular_values: Vec<f64>,
+    /// One-step-ahead NMAE on the training data (mean over states).
+    #[serde(default)]
+    pub fit_nmae: Option<f64>,
+    /// Held-out k-step rollout NMAE (mean over states), when a test span was scored.
+    #[serde(default)]
+    pub test_nmae: Option<f64>,
+    /// Spectral radius of `A`.
+    #[serde(default)]
+    pub spectral_radius: Option<f64>,
+    /// White-box estimates (method `whitebox`).
+    #[serde(default)]
+    pub whitebox: Option<WhiteboxEstimates>,
+    /// Anything else callers attach (search table, sweep settings …).
+    #[serde(flatten)]
+    pub extra: serde_json::Map<String, serde_json::Value>,
 }
 
 /// A discrete linear model over delay coordinates (see module docs).
@@ -45,4 +114,284 @@ pub struct LinearModel {
     pub b: DMatrix<f64>,
     /// Constant term, n·q.
     pub c: DVector<f64>,
+    /// Fingerprint of the training data (empty when unknown).
+    pub fingerprint: String,
+    /// Fit diagnostics.
+    pub diagnostics: Diagnostics,
+}
+
+/// On-disk form (DESIGN §7).
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ModelFile {
+    format: String,
+    method: String,
+    dt: f64,
+    delays: usize,
+    rank: usize,
+    states: Vec<String>,
+    inputs: Vec<String>,
+    offset: Offset,
+    input_mean: Vec<f64>,
+    #[serde(rename = "A")]
+    a: Vec<Vec<f64>>,
+    #[serde(rename = "B")]
+    b: Vec<Vec<f64>>,
+    c: Vec<f64>,
+    #[serde(default)]
+    fingerprint: String,
+    #[serde(default)]
+    diagnostics: Diagnostics,
+}
+
+fn rows_of(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
+    (0..m.nrows())
+        .map(|i| m.row(i).iter().copied().collect())
+        .collect()
+}
+
+fn matrix_from(
+    name: &str,
+    rows: &[Vec<f64>],
+    nr: usize,
+    nc: usize,
+) -> Result<DMatrix<f64>, SysidError> {
+    if rows.len() != nr {
+        return Err(model(format!(
+            "{name} has {} rows, expected {nr}",
+            rows.len()
+        )));
+    }
+    for (i, r) in rows.iter().enumerate() {
+        if r.len() != nc {
+            return Err(model(format!(
+                "{name} row {i} has {} entries, expected {nc}",
+                r.len()
+            )));
+        }
+    }
+    Ok(DMatrix::from_fn(nr, nc, |i, j| rows[i][j]))
+}
+
+impl LinearModel {
+    /// Number of physical states n.
+    pub fn n(&self) -> usize {
+        self.states.len()
+    }
+
+    /// Number of inputs m.
+    pub fn m(&self) -> usize {
+        self.inputs.len()
+    }
+
+    /// Dimension of the stacked state n·q.
+    pub fn order(&self) -> usize {
+        self.n() * self.delays
+    }
+
+    /// Check dimensions, names, finiteness and the sample time; the error names the problem.
+    pub fn validate(&self) -> Result<(), SysidError> {
+        let (n, m, q) = (self.n(), self.m(), self.delays);
+        if !["dmdc", "havokc", "whitebox"].contains(&self.method.as_str()) {
+            return Err(model(format!(
+                "method must be dmdc, havokc or whitebox, not {:?}",
+                self.method
+            )));
+        }
+        if !(self.dt.is_finite() && self.dt > 0.0) {
+            return Err(model(format!(
+                "dt must be a positive number of seconds, not {}",
+                self.dt
+            )));
+        }
+        if n == 0 {
+            return Err(model("states is empty"));
+        }
+        if m == 0 {
+            return Err(model("inputs is empty"));
+        }
+        if q == 0 {
+            return Err(model("delays must be at least 1"));
+        }
+        let nz = n * q;
+        if self.a.shape() != (nz, nz) {
+            return Err(model(format!(
+                "A is {}×{}, expected {nz}×{nz} (states × delays)",
+                self.a.nrows(),
+                self.a.ncols()
+            )));
+        }
+        if self.b.shape() != (nz, m) {
+            return Err(model(format!(
+                "B is {}×{}, expected {nz}×{m}",
+                self.b.nrows(),
+                self.b.ncols()
+            )));
+        }
+        if self.c.len() != nz {
+            return Err(model(format!(
+                "c has {} entries, expected {nz}",
+                self.c.len()
+            )));
+        }
+        if self.input_mean.len() != m {
+            return Err(model(format!(
+                "input_mean has {} entries, expected {m}",
+                self.input_mean.len()
+            )));
+        }
+        for (name, vals) in [
+            ("A", self.a.as_slice()),
+            ("B", self.b.as_slice()),
+            ("c", self.c.as_slice()),
+            ("input_mean", self.input_mean.as_slice()),
+        ] {
+            if vals.iter().any(|v| !v.is_finite()) {
+                return Err(model(format!("{name} contains a non-finite value")));
+            }
+        }
+        Ok(())
+    }
+
+    /// Serialize to the `swingrt-model/1` JSON text.
+    pub fn to_json(&self) -> Result<String, SysidError> {
+        self.validate()?;
+        let mut diagnostics = self.diagnostics.clone();
+        // JSON has no inf/NaN: drop scores that are not finite.
+        for v in [
+            &mut diagnostics.fit_nmae,
+            &mut diagnostics.test_nmae,
+            &mut diagnostics.spectral_radius,
+        ] {
+            if v.is_some_and(|x| !x.is_finite()) {
+                *v = None;
+            }
+        }
+        let file = ModelFile {
+            format: MODEL_FORMAT.to_string(),
+            method: self.method.clone(),
+            dt: self.dt,
+            delays: self.delays,
+            rank: self.rank,
+            states: self.states.clone(),
+            inputs: self.inputs.clone(),
+            offset: self.offset,
+            input_mean: self.input_mean.clone(),
+            a: rows_of(&self.a),
+            b: rows_of(&self.b),
+            c: self.c.iter().copied().collect(),
+            fingerprint: self.fingerprint.clone(),
+            diagnostics,
+        };
+        serde_json::to_string_pretty(&file).map_err(|e| model(format!("cannot serialize: {e}")))
+    }
+
+    /// Parse and validate a `swingrt-model/1` JSON text.
+    pub fn from_json(text: &str) -> Result<Self, SysidError> {
+        let file: ModelFile =
+            serde_json::from_str(text).map_err(|e| model(format!("invalid model JSON: {e}")))?;
+        if file.format != MODEL_FORMAT {
+            return Err(model(format!(
+                "format is {:?}, expected {MODEL_FORMAT:?}",
+                file.format
+            )));
+        }
+        let (n, m, q) = (file.states.len(), file.inputs.len(), file.delays);
+        let nz = n * q;
+        let a = matrix_from("A", &file.a, nz, nz)?;
+        let b = matrix_from("B", &file.b, nz, m)?;
+        let out = LinearModel {
+            method: file.method,
+            dt: file.dt,
+            delays: q,
+            rank: file.rank,
+            states: file.states,
+            inputs: file.inputs,
+            offset: file.offset,
+            input_mean: file.input_mean,
+            a,
+            b,
+            c: DVector::from_vec(file.c),
+            fingerprint: file.fingerprint,
+            diagnostics: file.diagnostics,
+        };
+        out.validate()?;
+        Ok(out)
+    }
+
+    /// Whether rows n.. of `A` are the exact delay shift (and those rows of `B`, `c` zero).
+    pub fn has_shift_structure(&self) -> bool {
+        let (n, nz) = (self.n(), self.order());
+        for i in n..nz {
+            for j in 0..nz {
+                let want = if j + n == i { 1.0 } else { 0.0 };
+                if self.a[(i, j)] != want {
+                    return false;
+                }
+            }
+            if self.b.row(i).iter().any(|v| *v != 0.0) || self.c[i] != 0.0 {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// Spectral radius of `A` (largest eigenvalue modulus).
+    pub fn spectral_radius(&self) -> Result<f64, SysidError> {
+        spectral_radius(&self.a)
+    }
+
+    /// Roll the model forward from `history` (the last q state rows, oldest first,
+    /// time-major n·q values) under `inputs` (H rows of m, time-major); returns the H
+    /// predicted state rows x_{k+1..k+H} (time-major).
+    pub fn predict(&self, history: &[f64], inputs: &[f64]) -> Result<Vec<f64>, SysidError> {
+        let (n, m, q) = (self.n(), self.m(), self.delays);
+        if history.len() != n * q {
+            return Err(super::error::data(format!(
+                "history has {} values, expected the last {q} rows of {n} states",
+                history.len()
+            )));
+        }
+        if inputs.len() % m != 0 {
+            return Err(super::error::data(format!(
+                "inputs have {} values, not a multiple of {m} inputs",
+                inputs.len()
+            )));
+        }
+        if history.iter().chain(inputs).any(|v| !v.is_finite()) {
+            return Err(super::error::data(
+                "history or inputs contain a non-finite value",
+            ));
+        }
+        let horizon = inputs.len() / m;
+        let nz = n * q;
+        // z newest first from the oldest-first history rows.
+        let mut z = DVector::<f64>::from_fn(nz, |i, _| {
+            let (lag, s) = (i / n, i % n);
+            history[(q - 1 - lag) * n + s]
+        });
+        let mut du = DVector::<f64>::zeros(m);
+        let mut out = Vec::with_capacity(horizon * n);
+        for k in 0..horizon {
+            for j in 0..m {
+                du[j] = inputs[k * m + j] - self.input_mean[j];
+            }
+            z = &self.a * &z + &self.b * &du + &self.c;
+            out.extend(z.iter().take(n));
+        }
+        Ok(out)
+    }
+}
+
+/// Spectral radius of a square matrix via faer's eigenvalues.
+pub fn spectral_radius(a: &DMatrix<f64>) -> Result<f64, SysidError> {
+    let n = a.nrows();
+    if n == 0 {
+        return Ok(0.0);
+    }
+    let fa = faer::Mat::<f64>::from_fn(n, n, |i, j| a[(i, j)]);
+    let ev = fa
+        .eigenvalues()
+        .map_err(|e| model(format!("eigenvalues did not converge: {e:?}")))?;
+    Ok(ev.iter().map(|z| z.re.hypot(z.im)).fold(0.0_f64, f64::max))
 }

@@ -469,6 +469,10 @@ impl SwingController for MpcController {
         self.m
     }
 
+    fn prediction(&mut self) -> Option<Vec<f64>> {
+        Some(self.predicted_trajectory().to_vec())
+    }
+
     fn period(&self) -> f64 {
         self.dt
     }

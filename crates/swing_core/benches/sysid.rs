@@ -1,0 +1,95 @@
+//! Identification budgets (DESIGN §8): one DMDc fit (q = 50, 120 s at 0.03 s, one axis)
+//! < 5 ms, and the 366-candidate reference grid (q = 2…60 step 2 × p = 5…(2q+1) step 5,
+//! 10 rollouts of 20 s) < 0.5 s, on one core.
+//!
+//! Data: a seeded pendulum-like flight — the white-box vehicle + payload model (0.2 kg on
+//! 1 m) under a velocity P loop tracking random steps (table 4.1 ranges), with a little
+//! velocity and swing noise, sampled at 0.03 s.
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use std::hint::black_box;
+use swing_core::sysid::dmdc::{self, DmdcSettings};
+use swing_core::sysid::search::{grid_search, Grid, SearchSettings};
+use swing_core::sysid::whitebox::WhiteboxParams;
+use swing_core::sysid::{Offset, Trajectory};
+
+const DT: f64 = 0.03;
+
+/// SplitMix64 uniform in [−1, 1).
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        (z >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    }
+}
+
+/// (x time-major [v, swing], u) for `seconds` of flight.
+fn flight(seconds: f64, seed: u64) -> (Vec<f64>, Vec<f64>) {
+    let params = WhiteboxParams {
+        friction: 0.002,
+        ..Default::default()
+    };
+    let (ad, bd) = params.discrete(DT);
+    let mut rng = Rng(seed);
+    let steps = (seconds / DT) as usize;
+    let mut s = nalgebra::Vector3::zeros();
+    let (mut vref, mut next_change) = (0.0, 0usize);
+    let (mut x, mut u) = (Vec::with_capacity(2 * steps), Vec::with_capacity(steps));
+    for k in 0..steps {
+        if k >= next_change {
+            vref = 1.5 * (rng.next() + 1.0);
+            next_change = k + ((17.5 + 7.5 * rng.next()) / DT) as usize;
+        }
+        let acc = (1.8 * (vref - s[0])).clamp(-4.0, 4.0) + 0.05 * rng.next();
+        x.push(s[0] + 0.002 * rng.next());
+        x.push(s[2] + 0.001 * rng.next());
+        u.push(acc + 0.1); // an IMU-like offset on the setpoint channel
+        s = ad * s + bd * acc;
+    }
+    (x, u)
+}
+
+fn bench(c: &mut Criterion) {
+    let (x, u) = flight(120.0, 1);
+    let traj = Trajectory::new(&x, 2, &u, 1).unwrap();
+    let settings = DmdcSettings {
+        delays: 50,
+        rank: Some(40),
+        offset: Offset::Mean,
+        dt: DT,
+    };
+    c.bench_function("dmdc_fit_q50_120s", |b| {
+        b.iter(|| dmdc::fit(black_box(&traj), &settings).unwrap())
+    });
+
+    let (x2, u2) = flight(160.0, 2);
+    let all = Trajectory::new(&x2, 2, &u2, 1).unwrap();
+    let split = (40.0 / DT) as usize;
+    let (test, train) = (all.slice(0, split), all.slice(split, all.len));
+    let grid = Grid::reference();
+    let count: usize = grid
+        .delays
+        .iter()
+        .map(|q| grid.ranks(*q, 2, 1, usize::MAX).len())
+        .sum();
+    assert_eq!(count, 366);
+    let search = SearchSettings {
+        offset: Offset::Mean,
+        horizon: (20.0 / DT).round() as usize,
+        ..SearchSettings::default()
+    };
+    let mut group = c.benchmark_group("search");
+    group.sample_size(10);
+    group.bench_function("reference_grid_366", |b| {
+        b.iter(|| grid_search(black_box(&train), &test, &grid, &search).unwrap())
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

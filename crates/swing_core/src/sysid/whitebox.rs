@@ -1,0 +1,402 @@
+//! White-box baseline (thesis 4.3): the linearised floating pendulum with estimated
+//! payload parameters.
+//!
+//! Continuous model (eq. 5.7, 5.8, states s = [v, θ̇, θ], input u = acceleration setpoint,
+//! with the *stable* sign of the swing stiffness — DESIGN §3 notes the seed's slip in 4.6):
+//!   v̇ = (c/(l m_Q)) θ̇ + (g m_p/m_Q) θ + u
+//!   θ̈ = −(c (m_Q+m_p)/(l² m_Q m_p)) θ̇ − (g (m_Q+m_p)/(m_Q l)) θ − u/l
+//! Cable length from the swing frequency (eq. 4.8): ω_n = √(g/l · (m_Q+m_p)/m_Q), so
+//! l = g (m_Q+m_p) / (m_Q ω_n²), with ω_n = 2π f and f the FFT peak in **Hz** (section
+//! 4.3.3 labels it rad/s, a slip). Payload mass by recursive least squares on hover thrust:
+//! T_z = (m_Q + m_p)(g − a_d) (NED, a_d the vertical acceleration), one scalar parameter.
+//!
+//! Discretisation: zero-order hold, [A_d B_d; 0 I] = exp([A B; 0 0]·dt) (scaling and
+//! squaring of a Taylor series).
+//!
+//! Delay form: the measured states are x = [v, θ] only (θ̇ is hidden, as for the data-driven
+//! models), so the model is written over z_k = [x_k; x_{k−1}] (q = 2), exactly. From
+//! y_k = C s_k and y_{k−1} = C A_d⁻¹ (s_k − B_d u_{k−1}) — four equations in the four
+//! unknowns (s_k, u_{k−1}) — s_k = L z_k with L the first three rows of
+//! [C 0; C A_d⁻¹ −C A_d⁻¹ B_d]⁻¹. Then x_{k+1} = C A_d L z_k + C B_d u_k: an exact
+//! representation of the discretised 3-state model (its outputs agree sample for sample
+//! once two samples of history exist), with no past input in the state. For several axes
+//! (states [v_1…v_a, θ_1…θ_a]) the axes are decoupled copies.
+
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix4, Vector3};
+
+use super::dmdc::delay_form;
+use super::error::{config, data, SysidError};
+use super::hankel::Trajectory;
+use super::model::{LinearModel, Offset, WhiteboxEstimates};
+
+/// Standard gravity [m/s²].
+pub const G: f64 = 9.81;
+
+/// Physical parameters of the white-box model.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WhiteboxParams {
+    /// Vehicle mass m_Q [kg].
+    pub vehicle_mass: f64,
+    /// Payload mass m_p [kg].
+    pub payload_mass: f64,
+    /// Cable length l [m].
+    pub length: f64,
+    /// Joint friction coefficient c [N·m·s/rad] (assumed known, thesis 4.3.1).
+    pub friction: f64,
+    /// Gravity g [m/s²].
+    pub gravity: f64,
+}
+
+impl Default for WhiteboxParams {
+    fn default() -> Self {
+        Self {
+            vehicle_mass: 0.952,
+            payload_mass: 0.2,
+            length: 1.0,
+            friction: 0.0,
+            gravity: G,
+        }
+    }
+}
+
+impl WhiteboxParams {
+    /// Check that every parameter is finite and in range; errors name the field.
+    pub fn validate(&self) -> Result<(), SysidError> {
+        for (name, v) in [
+            ("vehicle_mass", self.vehicle_mass),
+            ("payload_mass", self.payload_mass),
+            ("length", self.length),
+            ("gravity", self.gravity),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(config(format!("{name} must be positive, not {v}")));
+            }
+        }
+        if !(self.friction.is_finite() && self.friction >= 0.0) {
+            return Err(config(format!(
+                "friction must be ≥ 0, not {}",
+                self.friction
+            )));
+        }
+        Ok(())
+    }
+
+    /// Continuous (A, B) of eq. 5.7–5.8 over [v, θ̇, θ] (stable sign).
+    pub fn continuous(&self) -> (Matrix3<f64>, Vector3<f64>) {
+        let (mq, mp, l, c, g) = (
+            self.vehicle_mass,
+            self.payload_mass,
+            self.length,
+            self.friction,
+            self.gravity,
+        );
+        #[rustfmt::skip]
+        let a = Matrix3::new(
+            0.0, c / (l * mq), g * mp / mq,
+            0.0, -c * (mq + mp) / (l * l * mq * mp), -g * (mq + mp) / (l * mq),
+            0.0, 1.0, 0.0,
+        );
+        (a, Vector3::new(1.0, -1.0 / l, 0.0))
+    }
+
+    /// Zero-order-hold discretisation of [`Self::continuous`] at `dt` [s].
+    pub fn discrete(&self, dt: f64) -> (Matrix3<f64>, Vector3<f64>) {
+        let (a, b) = self.continuous();
+        let mut aug = Matrix4::<f64>::zeros();
+        aug.fixed_view_mut::<3, 3>(0, 0).copy_from(&(a * dt));
+        aug.fixed_view_mut::<3, 1>(0, 3).copy_from(&(b * dt));
+        let e = expm4(&aug);
+        (
+            e.fixed_view::<3, 3>(0, 0).into_owned(),
+            e.fixed_view::<3, 1>(0, 3).into_owned(),
+        )
+    }
+}
+
+/// Matrix exponential of a 4×4 matrix by scaling and squaring a Taylor series.
+pub fn expm4(m: &Matrix4<f64>) -> Matrix4<f64> {
+    let norm = m.abs().row_sum().max();
+    let mut s = 0;
+    let mut scale = 1.0;
+    while norm * scale > 0.25 {
+        scale *= 0.5;
+        s += 1;
+    }
+    let x = m * scale;
+    let mut term = Matrix4::<f64>::identity();
+    let mut sum = Matrix4::<f64>::identity();
+    for k in 1..=18 {
+        term = term * x / k as f64;
+        sum += term;
+    }
+    for _ in 0..s {
+        sum = sum * sum;
+    }
+    sum
+}
+
+/// Cable length from the swing frequency `freq_hz` (eq. 4.8).
+pub fn cable_length(freq_hz: f64, vehicle_mass: f64, payload_mass: f64, gravity: f64) -> f64 {
+    let w = 2.0 * std::f64::consts::PI * freq_hz;
+    gravity * (vehicle_mass + payload_mass) / (vehicle_mass * w * w)
+}
+
+/// In-place iterative radix-2 FFT (length a power of two).
+fn fft(re: &mut [f64], im: &mut [f64]) {
+    let n = re.len();
+    let mut j = 0;
+    for i in 1..n {
+        let mut bit = n >> 1;
+        while j & bit != 0 {
+            j ^= bit;
+            bit >>= 1;
+        }
+        j |= bit;
+        if i < j {
+            re.swap(i, j);
+            im.swap(i, j);
+        }
+    }
+    let mut len = 2;
+    while len <= n {
+        let ang = -2.0 * std::f64::consts::PI / len as f64;
+        for start in (0..n).step_by(len) {
+            for k in 0..len / 2 {
+                let (wr, wi) = ((ang * k as f64).cos(), (ang * k as f64).sin());
+                let (a, b) = (start + k, start + k + len / 2);
+                let (xr, xi) = (re[b] * wr - im[b] * wi, re[b] * wi + im[b] * wr);
+                re[b] = re[a] - xr;
+                im[b] = im[a] - xi;
+                re[a] += xr;
+                im[a] += xi;
+            }
+        }
+        len <<= 1;
+    }
+}
+
+/// Dominant frequency [Hz] of `signal` sampled at `dt`, searched in [f_min, f_max].
+///
+/// The mean is removed, a Hann window applied, the record zero-padded to ≥ 16× its length
+/// (power of two) and the single-sided amplitude spectrum's peak refined by a parabola
+/// through the log amplitudes of its neighbours.
+pub fn fft_peak_frequency(
+    signal: &[f64],
+    dt: f64,
+    f_min: f64,
+    f_max: f64,
+) -> Result<f64, SysidError> {
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(config(format!("dt must be positive, not {dt}")));
+    }
+    if !(f_min >= 0.0 && f_max > f_min) {
+        return Err(config(format!(
+            "frequency band [{f_min}, {f_max}] Hz is empty"
+        )));
+    }
+    if signal.len() < 8 {
+        return Err(data(format!(
+            "{} samples are too few for a spectrum (need at least 8)",
+            signal.len()
+        )));
+    }
+    if let Some(k) = signal.iter().position(|v| !v.is_finite()) {
+        return Err(data(format!("swing signal is not finite at sample {k}")));
+    }
+    let n = signal.len();
+    let mean = signal.iter().sum::<f64>() / n as f64;
+    let size = (16 * n).next_power_of_two();
+    let mut re = vec![0.0; size];
+    let mut im = vec![0.0; size];
+    for (k, v) in signal.iter().enumerate() {
+        let w = 0.5 - 0.5 * (2.0 * std::f64::consts::PI * k as f64 / (n - 1) as f64).cos();
+        re[k] = (v - mean) * w;
+    }
+    fft(&mut re, &mut im);
+    let df = 1.0 / (size as f64 * dt);
+    let k_lo = ((f_min / df).ceil() as usize).max(1);
+    let k_hi = ((f_max / df).floor() as usize).min(size / 2 - 1);
+    if k_lo > k_hi {
+        return Err(config("frequency band holds no spectral line"));
+    }
+    let amp = |k: usize| re[k].hypot(im[k]);
+    let kp = (k_lo..=k_hi)
+        .max_by(|a, b| amp(*a).total_cmp(&amp(*b)))
+        .expect("non-empty band");
+    if amp(kp) == 0.0 {
+        return Err(data(
+            "the swing signal is constant: no oscillation to measure",
+        ));
+    }
+    let (l, c, r) = (amp(kp - 1).ln(), amp(kp).ln(), amp(kp + 1).ln());
+    let denom = l - 2.0 * c + r;
+    let shift = if denom.abs() > 0.0 {
+        0.5 * (l - r) / denom
+    } else {
+        0.0
+    };
+    Ok((kp as f64 + shift.clamp(-0.5, 0.5)) * df)
+}
+
+/// Total mass by RLS on hover thrust: T_z,k = M (g − a_d,k) + e_k, forgetting factor λ.
+///
+/// Returns the estimate after every sample (the last one is the final estimate).
+pub fn rls_mass(
+    thrust_vertical: &[f64],
+    acc_down: &[f64],
+    gravity: f64,
+    forgetting: f64,
+    initial: f64,
+) -> Result<Vec<f64>, SysidError> {
+    if thrust_vertical.len() != acc_down.len() {
+        return Err(data(format!(
+            "{} thrust samples but {} acceleration samples",
+            thrust_vertical.len(),
+            acc_down.len()
+        )));
+    }
+    if thrust_vertical.is_empty() {
+        return Err(data("no thrust samples for the mass estimate"));
+    }
+    if !(forgetting > 0.0 && forgetting <= 1.0) {
+        return Err(config(format!(
+            "forgetting factor must be in (0, 1], not {forgetting}"
+        )));
+    }
+    let mut theta = initial;
+    let mut p = 1e3;
+    let mut out = Vec::with_capacity(acc_down.len());
+    for (k, (t, a)) in thrust_vertical.iter().zip(acc_down).enumerate() {
+        if !(t.is_finite() && a.is_finite()) {
+            return Err(data(format!(
+                "thrust or acceleration not finite at sample {k}"
+            )));
+        }
+        let phi = gravity - a;
+        let gain = p * phi / (forgetting + phi * p * phi);
+        theta += gain * (t - phi * theta);
+        p = (p - gain * phi * p) / forgetting;
+        out.push(theta);
+    }
+    Ok(out)
+}
+
+/// Top rows (2 × 4, 2 × 1) of the exact q = 2 delay form of one axis (see module docs).
+pub fn axis_delay_rows(
+    params: &WhiteboxParams,
+    dt: f64,
+) -> Result<(DMatrix<f64>, DMatrix<f64>), SysidError> {
+    params.validate()?;
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(config(format!("dt must be positive, not {dt}")));
+    }
+    let (ad, bd) = params.discrete(dt);
+    let ad_inv = ad
+        .try_inverse()
+        .ok_or_else(|| SysidError::Identification("discrete white-box A is singular".into()))?;
+    let c = nalgebra::Matrix2x3::new(1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
+    let mut m = Matrix4::<f64>::zeros();
+    m.fixed_view_mut::<2, 3>(0, 0).copy_from(&c);
+    m.fixed_view_mut::<2, 3>(2, 0).copy_from(&(c * ad_inv));
+    m.fixed_view_mut::<2, 1>(2, 3)
+        .copy_from(&(-(c * ad_inv * bd)));
+    let m_inv = m.try_inverse().ok_or_else(|| {
+        SysidError::Identification(
+            "swing rate cannot be reconstructed from two samples at this dt".into(),
+        )
+    })?;
+    let l = m_inv.fixed_view::<3, 4>(0, 0).into_owned();
+    let top = c * ad * l;
+    let btop = c * bd;
+    Ok((
+        DMatrix::from_fn(2, 4, |i, j| top[(i, j)]),
+        DMatrix::from_fn(2, 1, |i, _| btop[i]),
+    ))
+}
+
+/// The white-box model for `axes` decoupled axes (states [v…, θ…], inputs one per axis),
+/// in the q = 2 delay form, with the estimates recorded in the diagnostics.
+pub fn model(
+    params: &WhiteboxParams,
+    axes: usize,
+    dt: f64,
+    frequency_hz: Option<f64>,
+) -> Result<LinearModel, SysidError> {
+    if axes == 0 {
+        return Err(config("at least one axis is needed"));
+    }
+    let (top1, b1) = axis_delay_rows(params, dt)?;
+    let n = 2 * axes;
+    let mut a_top = DMatrix::<f64>::zeros(n, 2 * n);
+    let mut b_top = DMatrix::<f64>::zeros(n, axes);
+    for ax in 0..axes {
+        // Axis state s ∈ {0: v, 1: θ} lives at index ax (v) or axes + ax (θ).
+        let idx = |s: usize| if s == 0 { ax } else { axes + ax };
+        for i in 0..2 {
+            for lag in 0..2 {
+                for s in 0..2 {
+                    a_top[(idx(i), lag * n + idx(s))] = top1[(i, lag * 2 + s)];
+                }
+            }
+            b_top[(idx(i), ax)] = b1[(i, 0)];
+        }
+    }
+    let mut out = delay_form(
+        "whitebox",
+        dt,
+        2,
+        0,
+        Offset::None,
+        vec![0.0; axes],
+        &a_top,
+        &b_top,
+        &DVector::zeros(n),
+    );
+    out.diagnostics.whitebox = Some(WhiteboxEstimates {
+        vehicle_mass: params.vehicle_mass,
+        payload_mass: params.payload_mass,
+        length: params.length,
+        frequency_hz,
+        friction: params.friction,
+    });
+    Ok(out)
+}
+
+/// Apply the offset handling to a white-box model using training data: `mean` subtracts the
+/// training input mean; `affine` sets c to the mean one-step residual of the model.
+pub fn apply_offset(
+    model: &mut LinearModel,
+    traj: &Trajectory<'_>,
+    offset: Offset,
+) -> Result<(), SysidError> {
+    if traj.n != model.n() || traj.m != model.m() {
+        return Err(data(
+            "training data does not match the white-box model's columns",
+        ));
+    }
+    model.offset = offset;
+    match offset {
+        Offset::None => {}
+        Offset::Mean => model.input_mean = traj.input_mean(),
+        Offset::Affine => {
+            let (n, q) = (model.n(), model.delays);
+            if traj.len < q + 1 {
+                return Err(data("too few samples to learn the affine offset"));
+            }
+            let mut resid = vec![0.0; n];
+            for k in (q - 1)..traj.len - 1 {
+                let hist = &traj.x[(k + 1 - q) * n..(k + 1) * n];
+                let pred = model.predict(hist, traj.input(k))?;
+                for (i, r) in resid.iter_mut().enumerate() {
+                    *r += traj.state(k + 1)[i] - pred[i];
+                }
+            }
+            let count = (traj.len - q) as f64;
+            for (i, r) in resid.iter().enumerate() {
+                model.c[i] += r / count;
+            }
+        }
+    }
+    model.fingerprint = traj.fingerprint();
+    Ok(())
+}

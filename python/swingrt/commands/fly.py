@@ -1,0 +1,94 @@
+"""``swingrt fly``: the offboard swing-damping MPC over MAVLink (real vehicle or sitl).
+
+See :mod:`swingrt.mavlink.offboard` for the sequence and watchdogs, docs/flying.md for
+the PX4 setup and the safety procedure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+from swingrt.errors import ConfigError
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Register ``swingrt fly``."""
+    p = subparsers.add_parser(
+        "fly",
+        help="fly the MPC offboard over MAVLink",
+        description="Connect to a PX4 vehicle, switch to OFFBOARD, fly a velocity-step "
+        "mission with the swing-damping MPC at 1/Ts, hand back to hold at the end.",
+    )
+    p.add_argument(
+        "--connect",
+        required=True,
+        metavar="URL",
+        help="udp:HOST:PORT (send to a sitl), udpin:0.0.0.0:14540 (PX4 SITL), "
+        "serial:/dev/ttyTHS1:921600",
+    )
+    p.add_argument("--model", required=True, help="model JSON from `swingrt identify`")
+    p.add_argument("--mission", help="mission TOML ([[step]] t, vn, ve; duration)")
+    p.add_argument("--log", metavar="FILE", help="write the flight trace + loop timing")
+    p.add_argument("--system-id", type=int, help="expected vehicle system id")
+    p.add_argument(
+        "--hold", choices=("loiter", "posctl"), default="loiter", help="mode to hand back to"
+    )
+    p.add_argument(
+        "--acc-limit", type=float, default=5.0, help="clip |a| per axis, m/s^2 (default 5)"
+    )
+    p.add_argument(
+        "--budget", type=float, metavar="MS", help="compute budget per tick (default Ts/2)"
+    )
+    p.add_argument(
+        "--stale-factor",
+        type=float,
+        default=3.0,
+        help="telemetry older than this many Ts aborts (default 3)",
+    )
+    p.add_argument(
+        "--timeout", type=float, default=5.0, help="heartbeat/telemetry wait, s (default 5)"
+    )
+    return p
+
+
+def run(args) -> int:
+    """Fly; print the loop timing; any failure is one line and a non-zero exit."""
+    from swingrt.mavlink.link import connect
+    from swingrt.mavlink.offboard import Mission, Watchdog, fly, load_controller
+
+    if not (args.acc_limit > 0):
+        raise ConfigError(f"--acc-limit must be positive, not {args.acc_limit}")
+    if args.budget is not None and not (args.budget > 0):
+        raise ConfigError(f"--budget must be positive, not {args.budget}")
+    if not (args.stale_factor >= 1):
+        raise ConfigError(f"--stale-factor must be >= 1, not {args.stale_factor}")
+    logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
+    mission = Mission.from_toml(args.mission) if args.mission else Mission.default()
+    controller, ts, axes = load_controller(args.model)
+    watchdog = Watchdog(
+        ts,
+        stale_factor=args.stale_factor,
+        budget=args.budget * 1e-3 if args.budget is not None else None,
+    )
+    conn = connect(args.connect)
+    try:
+        report = fly(
+            conn,
+            controller,
+            ts=ts,
+            axes=axes,
+            mission=mission,
+            acc_limit=args.acc_limit,
+            log_path=args.log,
+            system_id=args.system_id,
+            hold=args.hold,
+            heartbeat_timeout=args.timeout,
+            telemetry_timeout=args.timeout,
+            watchdog=watchdog,
+        )
+    finally:
+        conn.close()
+    print(f"fly: {report.summary()}")
+    return 0

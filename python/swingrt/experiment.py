@@ -1,0 +1,425 @@
+"""Experiment runner: training flight → identification → PID / LQR / MPC on a step → report.
+
+Writes to the output folder: ``metrics.csv`` (columns of issue 4), ``metrics.md``, one
+Parquet trace per run named ``<scenario>__<controller>.parquet``, per-scenario PNG figures
+(velocity, swing angle and acceleration setpoint against time, controllers overlaid, as the
+thesis's figures 5.11–5.22), the identified models, and for the double pendulum the MPC's
+predicted trajectory at the step against the one flown (figures 5.20–5.21).
+"""
+
+from __future__ import annotations
+
+import copy
+import csv
+import io
+import itertools
+import json
+import math
+import os
+import sys
+import time
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from swingrt._io import atomic_path, write_text_atomic
+from swingrt.errors import ConfigError
+from swingrt.metrics import METRICS, step_metrics
+from swingrt.scenario import _merge, builtin, read_toml, resolve
+from swingrt.trace import Trace
+
+#: Columns of ``metrics.csv``.
+CSV_COLUMNS = ("scenario", "controller", *METRICS)
+_KNOWN_KEYS = {
+    "name",
+    "description",
+    "axes",
+    "controllers",
+    "step",
+    "duration",
+    "prediction_figure",
+    "common",
+    "training",
+    "evaluation",
+    "grid",
+    "identify",
+    "mpc",
+    "lqr",
+    "training_duration",
+}
+
+
+@dataclass
+class Experiment:
+    """A parsed experiment definition (see ``swingrt.experiments``)."""
+
+    name: str
+    description: str = ""
+    axes: str = "n"
+    controllers: list[str] = field(default_factory=lambda: ["pid", "lqr", "mpc"])
+    step: dict[str, float] = field(default_factory=lambda: {"t": 2.0, "vn": 2.0})
+    duration: float = 30.0
+    training_duration: float = 300.0
+    prediction_figure: bool = False
+    common: dict[str, Any] = field(default_factory=dict)
+    training: dict[str, Any] = field(default_factory=dict)
+    evaluation: dict[str, Any] = field(default_factory=dict)
+    grid: dict[str, list[Any]] = field(default_factory=dict)
+    identify: dict[str, Any] = field(default_factory=dict)
+    mpc: dict[str, Any] = field(default_factory=dict)
+    lqr: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any], source: str) -> Experiment:
+        """Validate a definition; errors name the key and the file."""
+        unknown = sorted(set(d) - _KNOWN_KEYS)
+        if unknown:
+            raise ConfigError(f"{source}: unknown key {unknown[0]!r}")
+        if "name" not in d:
+            raise ConfigError(f"{source}: name: missing")
+        exp = cls(**d)
+        if exp.axes not in ("n", "ne"):
+            raise ConfigError(f"{source}: axes: must be 'n' or 'ne' (got {exp.axes!r})")
+        for c in exp.controllers:
+            if c not in ("pid", "lqr", "mpc"):
+                raise ConfigError(f"{source}: controllers: unknown controller {c!r}")
+        if not (isinstance(exp.duration, (int, float)) and exp.duration > exp.step.get("t", 0)):
+            raise ConfigError(f"{source}: duration: must be longer than the step time")
+        for k, v in exp.grid.items():
+            if not isinstance(v, list) or not v:
+                raise ConfigError(f"{source}: grid.{k}: must be a non-empty list")
+        return exp
+
+
+def list_experiments() -> dict[str, str]:
+    """Built-in experiment names and descriptions."""
+    out = {}
+    for f in sorted(resources.files("swingrt.experiments").iterdir(), key=lambda p: p.name):
+        if f.name.endswith(".toml"):
+            d = tomllib.loads(f.read_text(encoding="utf-8"))
+            out[d["name"]] = d.get("description", "")
+    return out
+
+
+def load_experiment(name_or_path: str) -> Experiment:
+    """A built-in experiment by name, or a TOML file."""
+    p = Path(name_or_path)
+    if name_or_path.endswith(".toml") or p.is_file():
+        return Experiment.from_dict(read_toml(p), str(p))
+    f = resources.files("swingrt.experiments") / f"{name_or_path}.toml"
+    if not f.is_file():
+        names = ", ".join(list_experiments())
+        raise ConfigError(f"unknown experiment {name_or_path!r} (built in: {names})")
+    return Experiment.from_dict(tomllib.loads(f.read_text(encoding="utf-8")), f.name)
+
+
+def _set_dotted(d: dict[str, Any], key: str, value: Any) -> None:
+    parts = key.split(".")
+    for p in parts[:-1]:
+        d = d.setdefault(p, {})
+    d[parts[-1]] = value
+
+
+def cases(exp: Experiment) -> list[tuple[str, dict[str, Any]]]:
+    """(case name, scenario overrides) for every point of the grid (one case without grid)."""
+    if not exp.grid:
+        return [(exp.name, {})]
+    keys = list(exp.grid)
+    out = []
+    for values in itertools.product(*(exp.grid[k] for k in keys)):
+        over: dict[str, Any] = {}
+        label = []
+        for k, v in zip(keys, values, strict=True):
+            _set_dotted(over, k, v)
+            short = k.split(".")[-1]
+            short = {"mass": "mp", "length": "l"}.get(short, short)
+            label.append(f"{short}{v:g}" if isinstance(v, (int, float)) else f"{short}{v}")
+        out.append(("_".join(label), over))
+    return out
+
+
+def _step_setpoints(step: dict[str, float]) -> list[dict[str, float]]:
+    start = {"t": 0.0, **{k: 0.0 for k in step if k != "t"}}
+    return [start, dict(step)]
+
+
+def _hover_thrust(sc: dict[str, Any]) -> float:
+    """Normalised hover thrust PX4's estimator would settle on for this scenario."""
+    v = sc["vehicle"]
+    p = sc["payload"]
+    payload = {"none": 0.0, "single": p["mass"], "double": p["mass"] + p["mass2"]}[p["kind"]]
+    per_motor = (v["mass"] + payload) * 9.80665 / 4.0
+    a3, a2, a1, a0 = v["thrust_poly"]
+    lo, hi = 0.0, 1.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        x = v["pwm_min"] + (v["pwm_max"] - v["pwm_min"]) * mid
+        if ((a3 * x + a2) * x + a1) * x + a0 < per_motor:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def training_scenario(exp: Experiment, over: dict[str, Any], seed: int) -> dict[str, Any]:
+    """The random-step training flight of a case."""
+    sc = _merge(builtin("training"), copy.deepcopy(exp.common))
+    sc = _merge(sc, copy.deepcopy(over))
+    if exp.axes == "ne":
+        sc = _merge(
+            sc, {"random_steps": {"axes": "ne"}, "setpoints": [{"t": 0.0, "vn": 0.0, "ve": 0.0}]}
+        )
+    sc = _merge(sc, copy.deepcopy(exp.training))
+    sc["duration"] = float(exp.training_duration)
+    sc["name"] = "training"
+    return resolve(sc, default="training", seed=seed)
+
+
+def evaluation_scenario(
+    exp: Experiment, over: dict[str, Any], seed: int, training: dict[str, Any]
+) -> dict[str, Any]:
+    """The step flight of a case; PX4 keeps the training flight's hover thrust if the
+    evaluation changes the vehicle (nobody is told)."""
+    sc = _merge(builtin("step"), copy.deepcopy(exp.common))
+    sc = _merge(sc, copy.deepcopy(over))
+    sc["setpoints"] = _step_setpoints(exp.step)
+    sc["duration"] = float(exp.duration)
+    ev = copy.deepcopy(exp.evaluation)
+    if "vehicle" in ev and "hover_thrust" not in ev.get("controller", {}):
+        ev.setdefault("controller", {})["hover_thrust"] = _hover_thrust(training)
+    sc = _merge(sc, ev)
+    return resolve(sc, default="step", seed=seed)
+
+
+class _Log:
+    def __init__(self, quiet: bool):
+        self.quiet = quiet
+        self.t0 = time.perf_counter()
+
+    def __call__(self, msg: str) -> None:
+        if not self.quiet:
+            print(f"[{time.perf_counter() - self.t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
+
+
+def fly(
+    scenario: dict[str, Any],
+    controller: str,
+    *,
+    axes: str = "n",
+    model_json: str | None = None,
+    lqr_params: dict[str, float] | None = None,
+    mpc_settings: dict[str, Any] | None = None,
+    lqr_settings: dict[str, Any] | None = None,
+    engage_at: float = 0.0,
+    prediction_at: float | None = None,
+) -> tuple[Trace, dict[str, Any]]:
+    """Fly one scenario with ``pid``, ``lqr`` or ``mpc`` on the given axes.
+
+    Returns the trace and extras: fallback reason, tick timings, and (``prediction_at``)
+    the MPC's predicted outputs from the first tick at or after that time.
+    """
+    from swingrt import _core
+
+    sim = _core.Simulator(json.dumps(scenario))
+    n_axes = len(axes)
+    extras: dict[str, Any] = {}
+    if controller == "mpc":
+        if model_json is None:
+            raise ConfigError("mpc needs an identified model")
+        settings = json.dumps(mpc_settings) if mpc_settings else None
+        sim.attach_mpc(model_json, settings, engage_at, 0.03)
+    elif controller == "lqr":
+        if lqr_params is None:
+            raise ConfigError("lqr needs the white-box parameters")
+        settings = json.dumps(lqr_settings) if lqr_settings else None
+        p = lqr_params
+        sim.attach_lqr(p["m_q"], p["m_p"], p["l"], p["c"], n_axes, settings, engage_at, 0.02)
+    elif controller != "pid":
+        raise ConfigError(f"unknown controller {controller!r}")
+    if prediction_at is not None and controller == "mpc":
+        sim.advance(prediction_at)
+        sim.advance(0.03)
+        pred = sim.controller_prediction()
+        if pred is not None:
+            extras["prediction"] = {"t0": sim.t, "outputs": np.asarray(pred)}
+    sim.run_to_end()
+    trace = Trace(sim.take_trace(), {"scenario": scenario, "controller": controller})
+    extras["fallback"] = sim.fallback_reason
+    ticks = np.asarray(sim.tick_times())
+    if len(ticks):
+        extras["tick_us_median"] = float(np.median(ticks))
+        extras["tick_us_p99"] = float(np.percentile(ticks, 99))
+        extras["constrained_ticks"] = int(sim.constrained_ticks)
+    return trace, extras
+
+
+def identify_case(train: Trace, exp: Experiment) -> tuple[Any, Any, dict[str, float]]:
+    """DMDc (with search) for the MPC, white-box estimates for the LQR."""
+    from swingrt.sysid import identify
+
+    opts = {"search": True, **exp.identify}
+    model = identify(train, method="dmdc", axes=exp.axes, **opts)
+    wb = identify(train, method="whitebox", axes=exp.axes)
+    est = wb.diagnostics["whitebox"]
+    lqr = {
+        "m_q": float(est["vehicle_mass"]),
+        "m_p": float(est["payload_mass"]),
+        "l": float(est["length"]),
+        "c": float(est.get("friction", 0.0)),
+    }
+    return model, wb, lqr
+
+
+def run_experiment(
+    exp: Experiment, out: str | os.PathLike, *, seed: int = 0, quiet: bool = False
+) -> list[dict[str, Any]]:
+    """Run every case and controller of ``exp`` and write the report into ``out``."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    log = _Log(quiet)
+    rows: list[dict[str, Any]] = []
+    notes: list[str] = []
+    all_cases = cases(exp)
+    for i, (case, over) in enumerate(all_cases, 1):
+        log(f"{exp.name} [{i}/{len(all_cases)}] {case}: training flight")
+        train_sc = training_scenario(exp, over, seed)
+        from swingrt.sim import _run
+
+        train = _run(train_sc, False, "collect")
+        log(f"{exp.name} [{i}/{len(all_cases)}] {case}: identification")
+        model, wb, lqr = identify_case(train, exp)
+        model.save(out / f"{case}__model.json")
+        wb.save(out / f"{case}__whitebox.json")
+        ev_sc = evaluation_scenario(exp, over, seed + 1, train_sc)
+        traces: dict[str, Trace] = {}
+        prediction = None
+        for ctrl in exp.controllers:
+            log(f"{exp.name} [{i}/{len(all_cases)}] {case}: {ctrl}")
+            trace, extras = fly(
+                ev_sc,
+                ctrl,
+                axes=exp.axes,
+                model_json=model.to_json(),
+                lqr_params=lqr,
+                mpc_settings=exp.mpc or None,
+                lqr_settings=exp.lqr or None,
+                prediction_at=exp.step["t"] if exp.prediction_figure else None,
+            )
+            trace.to_parquet(out / f"{case}__{ctrl}.parquet")
+            traces[ctrl] = trace
+            axis = "ne" if exp.axes == "ne" else "n"
+            m = step_metrics(trace, t0=exp.step["t"], axis=axis)
+            rows.append({"scenario": case, "controller": ctrl, **m})
+            if extras.get("fallback"):
+                notes.append(f"{case} {ctrl}: fell back to PX4 PID ({extras['fallback']})")
+            if "prediction" in extras:
+                prediction = extras["prediction"]
+        notes.append(
+            f"{case}: DMDc q = {model.delays}, p = {model.rank}, "
+            f"test NMAE {model.diagnostics.get('test_nmae', float('nan')):.4f}; white-box "
+            f"m_p = {lqr['m_p']:.3f} kg, l = {lqr['l']:.3f} m"
+        )
+        plot_case(out / f"{case}.png", case, traces, exp.axes)
+        if prediction is not None and "mpc" in traces:
+            plot_prediction(out / f"{case}__prediction.png", prediction, traces["mpc"], model)
+    write_metrics(out, exp, rows, notes)
+    log(f"{exp.name}: wrote {out}")
+    return rows
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, float):
+        return "inf" if math.isinf(v) else f"{v:.4g}"
+    return str(v)
+
+
+def write_metrics(out: Path, exp: Experiment, rows: list[dict[str, Any]], notes: list[str]):
+    """``metrics.csv`` and ``metrics.md`` (atomic)."""
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=CSV_COLUMNS, lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: _fmt(r[k]) for k in CSV_COLUMNS})
+    write_text_atomic(out / "metrics.csv", buf.getvalue())
+    md = [f"# {exp.name}", "", exp.description, ""]
+    md.append("| " + " | ".join(CSV_COLUMNS) + " |")
+    md.append("|" + "---|" * len(CSV_COLUMNS))
+    for r in rows:
+        md.append("| " + " | ".join(_fmt(r[k]) for k in CSV_COLUMNS) + " |")
+    if notes:
+        md += ["", "## Notes", ""] + [f"- {n}" for n in notes]
+    write_text_atomic(out / "metrics.md", "\n".join(md) + "\n")
+
+
+_STYLE = {"pid": ("tab:gray", "PX4 PID"), "lqr": ("tab:blue", "LQR"), "mpc": ("tab:red", "MPC")}
+
+
+def plot_case(path: Path, title: str, traces: dict[str, Trace], axes: str) -> None:
+    """Velocity, swing angle and acceleration setpoint against time, controllers overlaid."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = ["n"] if axes == "n" else ["n", "e"]
+    fig, ax = plt.subplots(3, len(names), figsize=(7 * len(names), 8), sharex=True, squeeze=False)
+    for j, a in enumerate(names):
+        for ctrl, tr in traces.items():
+            color, label = _STYLE.get(ctrl, (None, ctrl))
+            t = tr.t
+            ax[0, j].plot(t, tr[f"v{a}"], color=color, label=label)
+            ax[1, j].plot(t, np.degrees(tr[f"swing_{a}"]), color=color, label=label)
+            ax[2, j].plot(t, tr[f"acc_sp_{a}"], color=color, label=label)
+        some = next(iter(traces.values()))
+        ax[0, j].plot(some.t, some[f"vel_sp_{a}"], "k--", lw=0.8, label="setpoint")
+        ax[0, j].set_ylabel(f"v_{a.upper()} [m/s]")
+        ax[1, j].set_ylabel(f"swing_{a} [deg]")
+        ax[2, j].set_ylabel(f"acc_sp_{a} [m/s²]")
+        ax[2, j].set_xlabel("t [s]")
+        for k in range(3):
+            ax[k, j].grid(alpha=0.3)
+        ax[0, j].legend(loc="lower right")
+    fig.suptitle(title)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)
+
+
+def plot_prediction(path: Path, prediction: dict[str, Any], flown: Trace, model) -> None:
+    """The MPC's predicted velocity and swing at the step against the flight actually flown.
+
+    The prediction is Np steps × axes × [v, swing rate, swing] (``MpcController``'s layout)
+    from the tick at ``prediction['t0']``, at the model's dt.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    outs = np.asarray(prediction["outputs"])
+    axes = len(model.inputs)
+    steps = len(outs) // (3 * axes)
+    pred = outs[: steps * 3 * axes].reshape(steps, axes, 3)
+    tp = prediction["t0"] + model.dt * np.arange(1, steps + 1)
+    mask = (flown.t >= tp[0] - model.dt) & (flown.t <= tp[-1])
+    fig, ax = plt.subplots(2, 1, figsize=(7, 5.6), sharex=True)
+    ax[0].plot(flown.t[mask], flown["vn"][mask], "k", label="flown")
+    ax[0].plot(tp, pred[:, 0, 0], "tab:red", ls="--", label="MPC prediction")
+    ax[0].set_ylabel("v_N [m/s]")
+    ax[1].plot(flown.t[mask], np.degrees(flown["swing_n"][mask]), "k", label="flown")
+    ax[1].plot(tp, np.degrees(pred[:, 0, 2]), "tab:red", ls="--", label="MPC prediction")
+    ax[1].set_ylabel("swing_n [deg]")
+    ax[1].set_xlabel("t [s]")
+    for a in ax:
+        a.grid(alpha=0.3)
+    ax[0].legend()
+    fig.suptitle(f"MPC prediction at t = {prediction['t0']:.2f} s vs flown")
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)

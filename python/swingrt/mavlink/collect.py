@@ -1,0 +1,98 @@
+"""Training-data collection over MAVLink (``swingrt collect --connect URL``).
+
+Flies the thesis's random velocity-step mission (table 4.1: step values uniform in
+[0, 3] m/s, held for intervals uniform in [10, 25] s, seeded) under PX4's *own* velocity
+controller (SET_POSITION_TARGET_LOCAL_NED with :data:`MASK_VEL_ALT_HOLD`: North/East
+velocity, altitude by position), and records what identification needs at the loop rate:
+the vehicle state, the swing sensor, and PX4's acceleration setpoint (the identification
+input, from POSITION_TARGET_LOCAL_NED ``afx afy afz``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from swingrt.errors import ConfigError
+from swingrt.mavlink.link import connect
+from swingrt.mavlink.offboard import (
+    MASK_VEL_ALT_HOLD,
+    Mission,
+    OffboardSession,
+    Watchdog,
+    _finish,
+)
+
+__all__ = ["random_step_mission", "collect_over_mavlink"]
+
+
+def random_step_mission(
+    duration: float,
+    seed: int,
+    *,
+    v_range: tuple[float, float] = (0.0, 3.0),
+    interval_range: tuple[float, float] = (10.0, 25.0),
+    axes: str = "n",
+) -> Mission:
+    """Table 4.1 schedule: each interval U(interval_range) s holds a step U(v_range) m/s
+    (North; with ``axes="ne"`` an independent East step too), from a seeded generator."""
+    if not (duration > 0 and math.isfinite(duration)):
+        raise ConfigError(f"duration must be positive, not {duration}")
+    if axes not in ("n", "ne"):
+        raise ConfigError(f"axes must be 'n' or 'ne', not {axes}")
+    rng = np.random.default_rng(seed)
+    steps = [(0.0, 0.0, 0.0)]
+    t = 2.0  # hover a moment before the first step
+    while t < duration:
+        vn = float(rng.uniform(*v_range))
+        ve = float(rng.uniform(*v_range)) if axes == "ne" else 0.0
+        steps.append((t, vn, ve))
+        t += float(rng.uniform(*interval_range))
+    return Mission(steps, float(duration))
+
+
+def collect_over_mavlink(
+    url: str,
+    *,
+    duration: float,
+    seed: int,
+    out,
+    axes: str = "n",
+    sample_time: float = 0.01,
+    system_id: int | None = None,
+    **session_options,
+):
+    """Fly the random-step mission over ``url`` and write the record to ``out``.
+
+    ``out`` is ``.parquet`` or ``.csv`` (DESIGN section 2 columns, ``acc_sp_*`` = PX4's
+    acceleration setpoint, ``vel_sp_*`` = the commanded velocity) written atomically, also
+    when a watchdog ends the flight early (then :class:`FlightAbort` is raised after).
+    Returns the :class:`FlightReport`.
+    """
+    mission = random_step_mission(duration, seed, axes=axes)
+    conn = connect(url)
+    try:
+        # Telemetry comes at ~100 Hz: at a 10 ms loop, 3 Ts would trip on one late packet;
+        # the stale limit is at least 0.1 s (the policy is PX4's own velocity control anyway).
+        session_options.setdefault(
+            "watchdog", Watchdog(sample_time, stale_factor=max(3.0, 0.1 / sample_time))
+        )
+        session = OffboardSession(conn, ts=sample_time, system_id=system_id, **session_options)
+        session.connect()
+
+        def policy(k, t, tel, rate):
+            vn, ve = mission.reference(t)
+            return (
+                MASK_VEL_ALT_HOLD,
+                (0.0, 0.0, session.alt_hold),
+                (vn, ve, 0.0),
+                (tel.acc_sp[0], tel.acc_sp[1], 0.0),
+                (vn, ve),
+            )
+
+        report = session.run(policy, mission.duration)
+        _finish(report, out)
+        return report
+    finally:
+        conn.close()

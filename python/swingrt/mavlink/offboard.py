@@ -1,0 +1,682 @@
+"""The offboard node (``swingrt fly``): swing-damping control over MAVLink at 1/Ts.
+
+Sequence (PX4 offboard rules, docs.px4.io "Offboard Mode"):
+
+1. wait for the autopilot's HEARTBEAT; request telemetry at 100 Hz with
+   MAV_CMD_SET_MESSAGE_INTERVAL (LOCAL_POSITION_NED, ATTITUDE_QUATERNION, DEBUG_VECT,
+   POSITION_TARGET_LOCAL_NED); wait until position and the swing sensor (DEBUG_VECT "SWING")
+   arrive;
+2. latch the altitude and heading; stream neutral setpoints for ``prestream`` seconds (PX4
+   refuses OFFBOARD without a > 2 Hz stream), then request OFFBOARD (MAV_CMD_DO_SET_MODE,
+   custom main mode 6), retrying while TEMPORARILY_REJECTED;
+3. at every tick k (absolute deadline t0 + k Ts; no drift, missed deadlines are skipped and
+   counted): read the newest telemetry, build the controller state per axis
+   ``[v, swing, swing_rate]`` (swing rate by backward difference over Ts, as the MPC's model
+   uses, thesis 5.4), ``a = controller.step(state, vel_ref)``, clip to ``acc_limit``, send
+   SET_POSITION_TARGET_LOCAL_NED with :data:`MASK_ACC_ALT_HOLD` (North/East acceleration,
+   altitude by position z, yaw held);
+4. at the end of the mission: switch to the hold mode (AUTO.LOITER by default) while still
+   streaming, and stop once the vehicle confirms.
+
+Watchdogs (checked every tick before computing): telemetry older than ``stale_factor`` Ts,
+``overrun_ticks`` consecutive ticks whose compute time exceeds ``budget`` (default Ts/2),
+no autopilot heartbeat for ``link_timeout``, or the vehicle leaving OFFBOARD by itself. On any
+of them the node sends a zero-velocity setpoint (PX4's own velocity hold), requests the hold
+mode and ends with a :class:`FlightAbort` naming the cause; ``swingrt fly`` prints it as one
+line and exits non-zero.
+
+Loop timing is recorded per tick: period jitter (start minus deadline) and compute time
+(telemetry snapshot to setpoint sent); :class:`FlightReport` gives median / p99 / max.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from swingrt.errors import ConfigError, ControlError, LinkError, SwingrtError
+from swingrt.mavlink.link import (
+    PX4_MAIN_MODE,
+    PX4_SUB_MODE_AUTO,
+    decode_px4_mode,
+    mavlink,
+    mode_name,
+    send_heartbeat,
+    wait_heartbeat,
+)
+from swingrt.mavlink.vehicle import TYPE_MASK
+
+__all__ = [
+    "MASK_ACC_ALT_HOLD",
+    "MASK_VEL_ALT_HOLD",
+    "Mission",
+    "Telemetry",
+    "Watchdog",
+    "FlightAbort",
+    "FlightReport",
+    "OffboardSession",
+    "fly",
+    "load_controller",
+    "PDSwingDamper",
+]
+
+log = logging.getLogger("swingrt.mavlink.offboard")
+
+_M = TYPE_MASK
+#: North/East acceleration, altitude by position z, yaw angle used (yaw rate ignored).
+MASK_ACC_ALT_HOLD = _M["X"] | _M["Y"] | _M["VX"] | _M["VY"] | _M["VZ"] | _M["AZ"] | _M["YAW_RATE"]
+#: North/East velocity, altitude by position z, yaw angle used: PX4's own velocity control.
+MASK_VEL_ALT_HOLD = _M["X"] | _M["Y"] | _M["VZ"] | _M["AX"] | _M["AY"] | _M["AZ"] | _M["YAW_RATE"]
+
+HOLD_MODES = {
+    "loiter": (PX4_MAIN_MODE["AUTO"], PX4_SUB_MODE_AUTO["LOITER"]),
+    "posctl": (PX4_MAIN_MODE["POSCTL"], 0),
+}
+OFFBOARD_MAIN = PX4_MAIN_MODE["OFFBOARD"]
+
+
+class FlightAbort(SwingrtError, RuntimeError):
+    """The flight was handed back to the flight controller early; the message says why."""
+
+
+# ----------------------------------------------------------------------------- mission
+
+
+@dataclass
+class Mission:
+    """Piecewise-constant velocity references: ``steps`` of (t [s], vn [m/s], ve [m/s])."""
+
+    steps: list[tuple[float, float, float]]
+    duration: float
+
+    @classmethod
+    def default(cls) -> Mission:
+        """The 2 m/s North step at t = 2 s, held 10 s, then back to 0 for 10 s."""
+        return cls([(0.0, 0.0, 0.0), (2.0, 2.0, 0.0), (12.0, 0.0, 0.0)], 22.0)
+
+    @classmethod
+    def from_toml(cls, path) -> Mission:
+        """``duration = S`` (optional) and ``[[step]]`` tables (or ``steps = [...]``) of
+        ``{t, vn, ve}``; ``ve`` defaults to 0. Errors name the field."""
+        import tomllib
+
+        p = Path(path)
+        try:
+            doc = tomllib.loads(p.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise ConfigError(f"{p}: no such mission file") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"{p}: invalid TOML: {exc}") from None
+        unknown = set(doc) - {"step", "steps", "duration"}
+        if unknown:
+            raise ConfigError(f"{p}: unknown key(s) {', '.join(sorted(unknown))}")
+        raw = doc.get("step", doc.get("steps"))
+        if not isinstance(raw, list) or not raw:
+            raise ConfigError(f"{p}: a mission needs [[step]] entries with t, vn, ve")
+        steps = []
+        for i, st in enumerate(raw):
+            if not isinstance(st, dict):
+                raise ConfigError(f"{p}: step[{i}] must be a table {{t, vn, ve}}")
+            bad = set(st) - {"t", "vn", "ve"}
+            if bad:
+                raise ConfigError(f"{p}: step[{i}]: unknown key(s) {', '.join(sorted(bad))}")
+            try:
+                t, vn, ve = float(st["t"]), float(st.get("vn", 0.0)), float(st.get("ve", 0.0))
+            except KeyError:
+                raise ConfigError(f"{p}: step[{i}].t is missing") from None
+            except (TypeError, ValueError):
+                raise ConfigError(f"{p}: step[{i}]: t, vn, ve must be numbers") from None
+            if not all(map(math.isfinite, (t, vn, ve))) or t < 0:
+                raise ConfigError(f"{p}: step[{i}]: t must be >= 0 and values finite")
+            if abs(vn) > 15 or abs(ve) > 15:
+                raise ConfigError(f"{p}: step[{i}]: |vn|, |ve| must be <= 15 m/s")
+            steps.append((t, vn, ve))
+        ts = [s[0] for s in steps]
+        if ts != sorted(ts) or len(set(ts)) != len(ts):
+            raise ConfigError(f"{p}: step times must increase")
+        duration = float(doc.get("duration", ts[-1] + 10.0))
+        if not math.isfinite(duration) or duration <= ts[-1]:
+            raise ConfigError(f"{p}: duration must be after the last step time")
+        return cls(steps, duration)
+
+    def reference(self, t: float) -> tuple[float, float]:
+        """(vn, ve) in force at time t."""
+        vn = ve = 0.0
+        for ts, a, b in self.steps:
+            if ts <= t + 1e-12:
+                vn, ve = a, b
+            else:
+                break
+        return vn, ve
+
+
+# ----------------------------------------------------------------------------- telemetry
+
+
+class Telemetry:
+    """Newest vehicle state from MAVLink, with the local receive time of each part."""
+
+    def __init__(self):
+        nan = math.nan
+        self.pos = [nan] * 3
+        self.vel = [nan] * 3
+        self.q = [1.0, 0.0, 0.0, 0.0]
+        self.swing = [nan, nan]
+        self.acc_sp = [nan] * 3
+        self.t_pos = self.t_att = self.t_swing = self.t_heartbeat = self.t_target = -math.inf
+        self.mode: tuple[int, int] | None = None
+        self.seen_offboard = False
+        self.acks: list[tuple[int, int]] = []
+        self.vehicle_sysid: int | None = None
+
+    def update(self, msg, now: float) -> None:
+        kind = msg.get_type()
+        if self.vehicle_sysid is not None and msg.get_srcSystem() != self.vehicle_sysid:
+            return
+        if kind == "LOCAL_POSITION_NED":
+            self.pos = [msg.x, msg.y, msg.z]
+            self.vel = [msg.vx, msg.vy, msg.vz]
+            self.t_pos = now
+        elif kind == "ATTITUDE_QUATERNION":
+            self.q = [msg.q1, msg.q2, msg.q3, msg.q4]
+            self.t_att = now
+        elif kind == "DEBUG_VECT":
+            name = msg.name
+            if isinstance(name, bytes):
+                name = name.decode("ascii", "replace")
+            if name.rstrip("\0") == "SWING":
+                self.swing = [msg.x, msg.y]
+                self.t_swing = now
+        elif kind == "POSITION_TARGET_LOCAL_NED":
+            self.acc_sp = [msg.afx, msg.afy, msg.afz]
+            self.t_target = now
+        elif kind == "HEARTBEAT":
+            if msg.autopilot != mavlink.MAV_AUTOPILOT_INVALID:
+                self.t_heartbeat = now
+                self.mode = decode_px4_mode(msg.custom_mode)
+                if self.mode[0] == OFFBOARD_MAIN:
+                    self.seen_offboard = True
+        elif kind == "COMMAND_ACK":
+            self.acks.append((msg.command, msg.result))
+        elif kind == "STATUSTEXT":
+            text = msg.text if isinstance(msg.text, str) else msg.text.decode("ascii", "replace")
+            log.info("vehicle: %s", text.rstrip("\0"))
+
+    def euler(self) -> tuple[float, float, float]:
+        q0, q1, q2, q3 = self.q
+        roll = math.atan2(2 * (q0 * q1 + q2 * q3), 1 - 2 * (q1 * q1 + q2 * q2))
+        pitch = math.asin(max(-1.0, min(1.0, 2 * (q0 * q2 - q3 * q1))))
+        yaw = math.atan2(2 * (q0 * q3 + q1 * q2), 1 - 2 * (q2 * q2 + q3 * q3))
+        return roll, pitch, yaw
+
+
+@dataclass
+class Watchdog:
+    """Decides when the node must hand control back (module doc); times in seconds."""
+
+    ts: float
+    stale_factor: float = 3.0
+    budget: float | None = None
+    overrun_ticks: int = 3
+    link_timeout: float = 3.0
+    _overruns: int = 0
+
+    def check_inputs(self, tel: Telemetry, now: float) -> str | None:
+        """Reason to abort before computing, or None."""
+        limit = self.stale_factor * self.ts
+        for name, t in (("LOCAL_POSITION_NED", tel.t_pos), ("DEBUG_VECT SWING", tel.t_swing)):
+            if now - t > limit:
+                age, lim = (now - t) * 1e3, limit * 1e3
+                return f"stale telemetry: {name} is {age:.0f} ms old (limit {lim:.0f} ms)"
+        if now - tel.t_heartbeat > self.link_timeout:
+            return f"dead link: no heartbeat for {now - tel.t_heartbeat:.1f} s"
+        return None
+
+    def check_compute(self, compute: float) -> str | None:
+        """Reason to abort after a tick that took ``compute`` seconds, or None."""
+        budget = self.budget if self.budget is not None else 0.5 * self.ts
+        if compute > budget:
+            self._overruns += 1
+            if self._overruns >= self.overrun_ticks:
+                return (
+                    f"solver overrun: {self._overruns} ticks over budget "
+                    f"(last {compute * 1e3:.1f} ms > {budget * 1e3:.1f} ms)"
+                )
+        else:
+            self._overruns = 0
+        return None
+
+
+# ----------------------------------------------------------------------------- report
+
+
+def _stats(x: np.ndarray) -> dict[str, float]:
+    if len(x) == 0:
+        return {"median": math.nan, "p99": math.nan, "max": math.nan}
+    return {
+        "median": float(np.median(x)),
+        "p99": float(np.percentile(x, 99)),
+        "max": float(np.max(x)),
+    }
+
+
+@dataclass
+class FlightReport:
+    """Outcome and loop timing of one offboard flight (times in seconds)."""
+
+    ts: float
+    ticks: int
+    missed_deadlines: int
+    jitter: dict[str, float]
+    compute: dict[str, float]
+    columns: dict[str, np.ndarray] = field(repr=False)
+    aborted: str | None = None
+
+    def summary(self) -> str:
+        j, c = self.jitter, self.compute
+        return (
+            f"{self.ticks} ticks at {self.ts * 1e3:.1f} ms, {self.missed_deadlines} missed; "
+            f"period jitter median {j['median'] * 1e3:.3f} ms p99 {j['p99'] * 1e3:.3f} ms "
+            f"max {j['max'] * 1e3:.3f} ms; compute median {c['median'] * 1e3:.3f} ms "
+            f"p99 {c['p99'] * 1e3:.3f} ms max {c['max'] * 1e3:.3f} ms"
+        )
+
+
+# ----------------------------------------------------------------------------- session
+
+#: Columns the node logs: DESIGN section 2 trace columns + loop timing.
+NODE_COLUMNS = (
+    "t", "pn", "pe", "pd", "vn", "ve", "vd", "roll", "pitch", "yaw", "swing_n", "swing_e",
+    "swing_rate_n", "swing_rate_e", "acc_sp_n", "acc_sp_e", "acc_sp_d", "vel_sp_n",
+    "vel_sp_e", "vel_sp_d", "jitter_s", "compute_s",
+)  # fmt: skip
+
+
+class OffboardSession:
+    """One offboard flight over an open connection: handshake, fixed-rate loop, handback.
+
+    ``policy(k, t, tel, swing_rate) -> (type_mask, (x, y, z), (vx, vy, vz), (ax, ay, az),
+    (vel_ref_n, vel_ref_e))`` computes the setpoint of tick k; it is the only thing that
+    differs between ``fly`` (MPC on acceleration) and ``collect`` (PX4 velocity control).
+    """
+
+    def __init__(
+        self,
+        conn,
+        *,
+        ts: float,
+        system_id: int | None = None,
+        hold: str = "loiter",
+        prestream: float = 1.5,
+        heartbeat_timeout: float = 5.0,
+        telemetry_timeout: float = 5.0,
+        telemetry_hz: float = 100.0,
+        watchdog: Watchdog | None = None,
+    ):
+        if not (ts > 0 and math.isfinite(ts)):
+            raise ConfigError(f"sample time must be positive, not {ts}")
+        if hold not in HOLD_MODES:
+            raise ConfigError(f"hold mode must be one of {', '.join(HOLD_MODES)}, not {hold}")
+        self.conn = conn
+        self.ts = ts
+        self.system_id = system_id
+        self.hold = HOLD_MODES[hold]
+        self.prestream = prestream
+        self.heartbeat_timeout = heartbeat_timeout
+        self.telemetry_timeout = telemetry_timeout
+        self.telemetry_hz = telemetry_hz
+        self.watchdog = watchdog or Watchdog(ts)
+        self.tel = Telemetry()
+        self._next_beat = 0.0
+
+    # -------------------------------------------------------------- plumbing
+
+    def _drain(self) -> None:
+        now = time.monotonic()
+        while True:
+            try:
+                msg = self.conn.recv_match(blocking=False)
+            except Exception as exc:  # garbage on the wire: drop, keep flying
+                log.warning("dropped unparsable input (%s)", exc)
+                continue
+            if msg is None:
+                break
+            self.tel.update(msg, now)
+        if now >= self._next_beat:
+            send_heartbeat(self.conn)
+            self._next_beat = now + 1.0
+
+    def _command(self, command: int, *params: float) -> None:
+        p = list(params) + [0.0] * (7 - len(params))
+        self.conn.mav.command_long_send(
+            self.conn.target_system, self.conn.target_component, command, 0, *p
+        )
+
+    def _request_mode(self, main: int, sub: int) -> None:
+        self._command(
+            mavlink.MAV_CMD_DO_SET_MODE, mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, main, sub
+        )
+
+    def _setpoint(self, mask: int, pos, vel, acc) -> None:
+        self.conn.mav.set_position_target_local_ned_send(
+            int(time.monotonic() * 1000) & 0xFFFFFFFF,
+            self.conn.target_system,
+            self.conn.target_component,
+            mavlink.MAV_FRAME_LOCAL_NED,
+            mask,
+            *pos,
+            *vel,
+            *acc,
+            self.yaw_hold,
+            0.0,
+        )
+
+    def _take_ack(self, command: int) -> int | None:
+        for i, (cmd, result) in enumerate(self.tel.acks):
+            if cmd == command:
+                del self.tel.acks[i]
+                return result
+        return None
+
+    # -------------------------------------------------------------- phases
+
+    def connect(self) -> None:
+        """Heartbeat, telemetry rates, first telemetry; raises LinkError with one line."""
+        hb = wait_heartbeat(self.conn, timeout=self.heartbeat_timeout, system_id=self.system_id)
+        self.tel.vehicle_sysid = hb.get_srcSystem()
+        self.tel.update(hb, time.monotonic())
+        interval_us = 1e6 / self.telemetry_hz
+        for msg_id in (
+            mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
+            mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION,
+            mavlink.MAVLINK_MSG_ID_DEBUG_VECT,
+            mavlink.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED,
+        ):
+            self._command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, interval_us)
+        deadline = time.monotonic() + self.telemetry_timeout
+        while time.monotonic() < deadline:
+            self._drain()
+            if math.isfinite(self.tel.t_pos) and math.isfinite(self.tel.t_swing):
+                break
+            time.sleep(0.005)
+        else:
+            url = getattr(self.conn, "swingrt_url", "the link")
+            missing = []
+            if not math.isfinite(self.tel.t_pos):
+                missing.append("LOCAL_POSITION_NED")
+            if not math.isfinite(self.tel.t_swing):
+                missing.append("DEBUG_VECT 'SWING' (swing sensor)")
+            raise LinkError(
+                f"no {' and no '.join(missing)} from {url} within {self.telemetry_timeout:g} s"
+            )
+        self.tel.acks.clear()
+        self.alt_hold = self.tel.pos[2]
+        self.yaw_hold = self.tel.euler()[2]
+
+    def run(self, policy: Callable, duration: float, *, reset: Callable | None = None):
+        """Pre-stream, engage OFFBOARD, run ``policy`` for ``duration`` s, hand back."""
+        n_max = int(math.ceil(duration / self.ts)) + 1
+        cols = {c: np.full(n_max, np.nan) for c in NODE_COLUMNS}
+        aborted = None
+        k = 0
+        missed = 0
+        try:
+            self._engage()
+            prev_swing = list(self.tel.swing)
+            t0 = time.perf_counter()
+            if reset is not None:
+                reset(self.tel)
+            while k < n_max:
+                deadline = t0 + k * self.ts
+                now = time.perf_counter()
+                if deadline > now:
+                    time.sleep(deadline - now)
+                    now = time.perf_counter()
+                elif now - deadline >= self.ts:  # skip whole missed periods, keep the grid
+                    skip = int((now - deadline) / self.ts)
+                    missed += skip
+                    k += skip
+                    if k >= n_max:
+                        break
+                    deadline = t0 + k * self.ts
+                jitter = now - deadline
+                self._drain()
+                mono = time.monotonic()
+                reason = self.watchdog.check_inputs(self.tel, mono)
+                if reason is None and self.tel.seen_offboard and self.tel.mode[0] != OFFBOARD_MAIN:
+                    reason = f"vehicle left OFFBOARD (now {mode_name(*self.tel.mode)})"
+                if reason is not None:
+                    aborted = f"{reason} at t = {k * self.ts:.2f} s"
+                    break
+                c0 = time.perf_counter()
+                sw = self.tel.swing
+                rate = ((sw[0] - prev_swing[0]) / self.ts, (sw[1] - prev_swing[1]) / self.ts)
+                if k == 0:
+                    rate = (0.0, 0.0)
+                prev_swing = list(sw)
+                mask, pos, vel, acc, ref = policy(k, k * self.ts, self.tel, rate)
+                self._setpoint(mask, pos, vel, acc)
+                compute = time.perf_counter() - c0
+                self._log(cols, k, jitter, compute, rate, acc, ref)
+                k += 1
+                reason = self.watchdog.check_compute(compute)
+                if reason is not None:
+                    aborted = f"{reason} at t = {(k - 1) * self.ts:.2f} s"
+                    break
+        finally:
+            self._hand_back(emergency=aborted is not None)
+        n = min(k, n_max)
+        out = {c: v[:n] for c, v in cols.items()}
+        ok = np.isfinite(out["jitter_s"])
+        report = FlightReport(
+            ts=self.ts,
+            ticks=int(ok.sum()),
+            missed_deadlines=missed,
+            jitter=_stats(out["jitter_s"][ok]),
+            compute=_stats(out["compute_s"][ok]),
+            columns=out,
+            aborted=aborted,
+        )
+        return report
+
+    def _neutral(self) -> None:
+        self._setpoint(
+            MASK_ACC_ALT_HOLD, (0.0, 0.0, self.alt_hold), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+        )
+
+    def _engage(self) -> None:
+        """Stream neutral setpoints, then request OFFBOARD until accepted."""
+        t_end = time.monotonic() + self.prestream
+        while time.monotonic() < t_end:
+            self._drain()
+            self._neutral()
+            time.sleep(self.ts)
+        tries = 0
+        next_try = 0.0
+        give_up = time.monotonic() + 5.0
+        while True:
+            now = time.monotonic()
+            self._drain()
+            self._neutral()
+            result = self._take_ack(mavlink.MAV_CMD_DO_SET_MODE)
+            if result == mavlink.MAV_RESULT_ACCEPTED:
+                log.info("OFFBOARD accepted after %d request(s)", tries)
+                return
+            if result is not None and result != mavlink.MAV_RESULT_TEMPORARILY_REJECTED:
+                raise FlightAbort(f"vehicle refused OFFBOARD (MAV_RESULT {result})")
+            if now >= give_up:
+                raise FlightAbort("vehicle did not accept OFFBOARD within 5 s")
+            if now >= next_try:
+                self._request_mode(OFFBOARD_MAIN, 0)
+                tries += 1
+                next_try = now + 0.5
+            time.sleep(self.ts)
+
+    def _hand_back(self, *, emergency: bool) -> None:
+        """Request the hold mode while streaming a safe setpoint; wait for the ack."""
+        if not hasattr(self, "alt_hold"):
+            return  # never engaged
+        main, sub = self.hold
+        deadline = time.monotonic() + 2.0
+        next_try = 0.0
+        try:
+            while time.monotonic() < deadline:
+                now = time.monotonic()
+                self._drain()
+                # zero velocity = PX4's own velocity hold: safe whatever the swing state
+                self._setpoint(
+                    MASK_VEL_ALT_HOLD, (0.0, 0.0, self.alt_hold), (0.0, 0.0, 0.0), (0.0,) * 3
+                )
+                if self._take_ack(mavlink.MAV_CMD_DO_SET_MODE) == mavlink.MAV_RESULT_ACCEPTED:
+                    log.info("handed back to %s", mode_name(main, sub))
+                    return
+                if now >= next_try:
+                    self._request_mode(main, sub)
+                    next_try = now + 0.3
+                time.sleep(self.ts)
+            log.warning(
+                "no ack for %s; PX4's offboard-loss failsafe takes over", mode_name(main, sub)
+            )
+        except OSError as exc:
+            log.warning("could not hand back (%s); PX4's offboard-loss failsafe takes over", exc)
+
+    def _log(self, cols, k, jitter, compute, rate, acc, ref) -> None:
+        tel = self.tel
+        roll, pitch, yaw = tel.euler()
+        row = (
+            k * self.ts, *tel.pos, *tel.vel, roll, pitch, yaw, *tel.swing, *rate,
+            acc[0], acc[1], tel.acc_sp[2], ref[0], ref[1], 0.0, jitter, compute,
+        )  # fmt: skip
+        for c, v in zip(NODE_COLUMNS, row, strict=True):
+            cols[c][k] = v
+
+
+# ----------------------------------------------------------------------------- controllers
+
+
+class PDSwingDamper:
+    """A simple velocity-tracking + swing-damping law, a stand-in controller for tests.
+
+    a = kv (v_ref - v) + kθ θ + kω θ̇  per axis (accelerating towards the payload's side damps
+    the linear pendulum θ̈ = -(g/l) θ - a/l); not the thesis's controller (that is the MPC).
+    """
+
+    def __init__(self, kv: float = 1.0, k_swing: float = 0.0, k_rate: float = 2.0):
+        self.kv, self.k_swing, self.k_rate = kv, k_swing, k_rate
+
+    def reset(self, state, acc) -> None:
+        """No internal state."""
+
+    def step(self, state: np.ndarray, vel_ref: np.ndarray) -> np.ndarray:
+        """Acceleration setpoints (axes,) for state rows [v, swing, swing_rate]."""
+        s = np.asarray(state, dtype=float)
+        return (
+            self.kv * (np.asarray(vel_ref) - s[:, 0])
+            + self.k_swing * s[:, 1]
+            + self.k_rate * s[:, 2]
+        )
+
+
+def load_controller(model_path, settings=None):
+    """Build the MPC (``swingrt._core.Mpc``) from a model JSON file; returns (ctrl, ts, axes)."""
+    p = Path(model_path)
+    try:
+        text = p.read_text(encoding="utf-8")
+        model = json.loads(text)
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: no such model file") from None
+    except json.JSONDecodeError as exc:
+        raise ConfigError(f"{p}: not a JSON model ({exc.msg} at line {exc.lineno})") from None
+    if not isinstance(model, dict) or model.get("format") != "swingrt-model/1":
+        raise ConfigError(f"{p}: not a swingrt-model/1 file")
+    try:
+        ts = float(model["dt"])
+        inputs = list(model["inputs"])
+    except (KeyError, TypeError, ValueError):
+        raise ConfigError(f"{p}: model lacks dt or inputs") from None
+    axes = len(inputs)
+    if axes not in (1, 2):
+        raise ConfigError(f"{p}: model has {axes} inputs; fly supports 1 (North) or 2 (N, E)")
+    try:
+        from swingrt._core import Mpc
+    except ImportError:
+        raise ControlError("this build of swingrt has no MPC (swingrt._core.Mpc)") from None
+    return Mpc(text, settings), ts, axes
+
+
+def fly(
+    conn,
+    controller,
+    *,
+    ts: float,
+    axes: int = 2,
+    mission: Mission | None = None,
+    acc_limit: float = 5.0,
+    log_path=None,
+    **session_options,
+) -> FlightReport:
+    """Fly ``mission`` with ``controller`` (any object with ``step``/``reset``) over ``conn``.
+
+    With one axis the controller flies North and East is held by a velocity P law
+    (a_e = -1.0 ve), since PX4 needs North and East setpoints of the same kind.
+    Raises :class:`FlightAbort` (after handing back) when a watchdog fires; the trace and
+    timing are written to ``log_path`` in any case.
+    """
+    mission = mission or Mission.default()
+    if axes not in (1, 2):
+        raise ConfigError(f"axes must be 1 or 2, not {axes}")
+    session = OffboardSession(conn, ts=ts, **session_options)
+    session.connect()
+    state = np.zeros((axes, 3))
+    ref = np.zeros(axes)
+
+    def fill(tel, rate):
+        state[0] = (tel.vel[0], tel.swing[0], rate[0])
+        if axes == 2:
+            state[1] = (tel.vel[1], tel.swing[1], rate[1])
+
+    def reset(tel):
+        fill(tel, (0.0, 0.0))
+        controller.reset(state.copy(), np.zeros(axes))
+
+    def policy(k, t, tel, rate):
+        fill(tel, rate)
+        vn, ve = mission.reference(t)
+        ref[0] = vn
+        if axes == 2:
+            ref[1] = ve
+        a = np.asarray(controller.step(state, ref), dtype=float).reshape(-1)
+        if a.shape != (axes,) or not np.all(np.isfinite(a)):
+            raise ControlError(f"controller returned {a!r}, expected {axes} finite values")
+        an = float(np.clip(a[0], -acc_limit, acc_limit))
+        ae = float(np.clip(a[1], -acc_limit, acc_limit)) if axes == 2 else -1.0 * tel.vel[1]
+        return (
+            MASK_ACC_ALT_HOLD,
+            (0.0, 0.0, session.alt_hold),
+            (0.0, 0.0, 0.0),
+            (an, ae, 0.0),
+            (vn, ve),
+        )
+
+    report = session.run(policy, mission.duration, reset=reset)
+    _finish(report, log_path)
+    return report
+
+
+def _finish(report: FlightReport, log_path) -> None:
+    if log_path is not None:
+        from swingrt.data import write_columns
+
+        write_columns(report.columns, log_path)
+    log.info("loop: %s", report.summary())
+    if report.aborted:
+        exc = FlightAbort(f"{report.aborted}; control handed back to the flight controller")
+        exc.report = report
+        raise exc

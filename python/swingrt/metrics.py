@@ -1,0 +1,122 @@
+"""Step-response metrics of a trace (thesis 5.5; issue 4's ``metrics.csv`` columns).
+
+For a velocity step at ``t0`` along ``axis`` (``n``, ``e`` or ``ne``, the last projected on
+the step direction), over the window after the step:
+
+- ``peak_swing_deg``: largest |swing| [deg] (swing magnitude for two axes);
+- ``swing_settle_s``: time after ``t0`` from which |swing − final| < 1° for good [s];
+- ``swing_iae_deg_s``: ∫ |swing − final| dt [deg·s];
+- ``overshoot_pct``: (peak velocity − final) / |step| · 100 along the step [%];
+- ``v_settle_s``: time after ``t0`` from which |v − v_sp| < 5 % of the step for good [s];
+- ``ss_error``: |v_sp − mean v over the last 2 s| [m/s];
+- ``effort``: ∫ |a_sp|² dt of the horizontal acceleration setpoint [m²/s³].
+
+"final" is the mean over the last 2 s of the window.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from swingrt.errors import DataError
+
+#: Metric names in ``metrics.csv`` order.
+METRICS = (
+    "peak_swing_deg",
+    "swing_settle_s",
+    "swing_iae_deg_s",
+    "overshoot_pct",
+    "v_settle_s",
+    "ss_error",
+    "effort",
+)
+
+
+def _col(trace, name: str) -> np.ndarray:
+    cols = trace.columns if hasattr(trace, "columns") else trace
+    if name not in cols:
+        raise DataError(f"trace has no column {name!r}")
+    return np.asarray(cols[name], dtype=float)
+
+
+def _settle(t: np.ndarray, err: np.ndarray, band: float, t0: float) -> float:
+    outside = np.nonzero(np.abs(err) >= band)[0]
+    if len(outside) == 0:
+        return 0.0
+    last = outside[-1]
+    if last + 1 >= len(t):
+        return math.inf
+    return float(t[last + 1] - t0)
+
+
+def step_metrics(
+    trace,
+    *,
+    t0: float,
+    axis: str = "n",
+    t_end: float | None = None,
+    v_before: float | None = None,
+    v_after: float | None = None,
+) -> dict[str, float]:
+    """Metrics of a velocity step at ``t0`` (see module docs); returns a dict of floats."""
+    t = _col(trace, "t")
+    if axis not in ("n", "e", "ne"):
+        raise DataError(f"axis must be 'n', 'e' or 'ne' (got {axis!r})")
+    cols = getattr(trace, "columns", trace)
+    swing_name = "swing_true_{}" if "swing_true_n" in cols else "swing_{}"
+    sn, se = _col(trace, swing_name.format("n")), _col(trace, swing_name.format("e"))
+    vn, ve = _col(trace, "vn"), _col(trace, "ve")
+    an, ae = _col(trace, "acc_sp_n"), _col(trace, "acc_sp_e")
+    if t_end is None:
+        t_end = float(t[-1])
+    win = (t >= t0) & (t <= t_end + 1e-9)
+    if win.sum() < 10:
+        raise DataError(f"too few samples after the step at t = {t0} s")
+    pre = t < t0
+    if axis == "ne":
+        vsp_n, vsp_e = _col(trace, "vel_sp_n"), _col(trace, "vel_sp_e")
+        after = np.array([np.nanmedian(vsp_n[win]), np.nanmedian(vsp_e[win])])
+        norm = float(np.hypot(*after)) or 1.0
+        d = after / norm
+        v = vn * d[0] + ve * d[1]
+        swing = np.hypot(sn, se)
+        vb = 0.0 if v_before is None else v_before
+        va = norm if v_after is None else v_after
+    else:
+        v = vn if axis == "n" else ve
+        swing = sn if axis == "n" else se
+        vsp = _col(trace, f"vel_sp_{axis}")
+        vb = float(np.nanmedian(vsp[pre])) if v_before is None and pre.any() else (v_before or 0.0)
+        va = float(np.nanmedian(vsp[win])) if v_after is None else v_after
+    tw, vw, sw = t[win], v[win], swing[win]
+    dt = float(np.median(np.diff(tw)))
+    tail = tw >= tw[-1] - 2.0
+    final_swing = float(np.mean(sw[tail]))
+    step = va - vb
+    peak_v = float(np.max(vw * np.sign(step or 1.0))) * np.sign(step or 1.0)
+    overshoot = 100.0 * (peak_v - va) / abs(step) * np.sign(step) if step else 0.0
+    a2 = an[win] ** 2 + ae[win] ** 2
+    return {
+        "peak_swing_deg": float(np.degrees(np.max(np.abs(sw)))),
+        "swing_settle_s": _settle(tw, np.degrees(sw - final_swing), 1.0, t0),
+        "swing_iae_deg_s": float(np.degrees(np.sum(np.abs(sw - final_swing)) * dt)),
+        "overshoot_pct": float(max(overshoot, 0.0)),
+        "v_settle_s": _settle(tw, vw - va, 0.05 * abs(step) if step else 0.02, t0),
+        "ss_error": float(abs(va - np.mean(vw[tail]))),
+        "effort": float(np.sum(a2) * dt),
+    }
+
+
+def step_time(trace, axis: str = "n") -> float | None:
+    """Time of the first change of the velocity setpoint on ``axis`` after t = 0, if any."""
+    t = _col(trace, "t")
+    vsp = _col(trace, f"vel_sp_{axis[0]}")
+    finite = np.isfinite(vsp)
+    if finite.sum() < 2:
+        return None
+    v = np.where(finite, vsp, np.nan)
+    first = v[np.argmax(finite)]
+    changed = np.nonzero(finite & (np.abs(v - first) > 1e-6))[0]
+    return float(t[changed[0]]) if len(changed) else None

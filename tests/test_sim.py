@@ -1,0 +1,157 @@
+"""The simulator from Python and the CLI (issue 2): API, files, determinism, bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import swingrt
+from swingrt.errors import ConfigError, SwingrtError
+
+DESIGN_COLUMNS = (
+    "t pn pe pd vn ve vd roll pitch yaw swing_n swing_e swing_rate_n swing_rate_e "
+    "acc_sp_n acc_sp_e acc_sp_d vel_sp_n vel_sp_e vel_sp_d"
+).split()
+
+
+def test_simulate_default_step_has_design_columns_and_swings():
+    tr = swingrt.simulate(duration=10.0)
+    for c in DESIGN_COLUMNS:
+        assert c in tr.columns, c
+    t = tr.t
+    assert np.allclose(np.diff(t), 0.01)
+    assert t[-1] == pytest.approx(10.0)
+    # The 2 m/s North step at t = 2 s: velocity reaches it, payload swings South of the
+    # vehicle (negative swing_n) while accelerating North.
+    assert tr["vel_sp_n"][t < 1.9].max() == 0.0
+    assert tr["vel_sp_n"][t > 2.1].min() == 2.0
+    assert abs(tr["vn"][-1] - 2.0) < 0.1
+    assert tr["swing_n"].min() < -math.radians(10)
+    assert "swing2_n" not in tr.columns
+
+
+def test_same_seed_same_trace_other_seed_other_noise():
+    cfg = {"noise": {"swing_std": 0.01}}
+    a = swingrt.simulate(cfg, duration=3.0, seed=4)
+    b = swingrt.simulate(cfg, duration=3.0, seed=4)
+    c = swingrt.simulate(cfg, duration=3.0, seed=5)
+    for k in a.columns:
+        assert np.array_equal(a[k], b[k], equal_nan=True), k
+    assert not np.array_equal(a["swing_n"], c["swing_n"])
+
+
+def test_double_pendulum_logs_the_hidden_link():
+    tr = swingrt.simulate({"payload": {"kind": "double"}}, duration=6.0)
+    assert "swing2_n" in tr.columns
+    assert np.abs(tr["swing2_n"]).max() > 0.05
+
+
+def test_collect_follows_table_4_1():
+    tr = swingrt.collect(duration=120.0, seed=1)
+    vsp = tr["vel_sp_n"]
+    changes = tr.t[1:][np.abs(np.diff(vsp)) > 1e-9]
+    assert len(changes) >= 4
+    gaps = np.diff(changes)
+    assert gaps.min() >= 10.0 - 0.011 and gaps.max() <= 25.0 + 0.011
+    assert vsp.min() >= 0.0 and vsp.max() <= 3.0
+
+
+def test_parquet_and_csv_round_trip(tmp_path):
+    tr = swingrt.simulate(duration=2.0)
+    tr.to_parquet(tmp_path / "a.parquet")
+    back = swingrt.Trace.from_parquet(tmp_path / "a.parquet")
+    for k in tr.columns:
+        assert np.array_equal(tr[k], back[k], equal_nan=True)
+    assert back.meta["scenario"]["payload"]["mass"] == 0.2
+    tr.to_csv(tmp_path / "a.csv")
+    data = np.genfromtxt(tmp_path / "a.csv", delimiter=",", names=True)
+    assert np.allclose(data["vn"], tr["vn"], rtol=1e-8, atol=1e-12)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "a.parquet"]
+
+
+def test_steppable_simulator_takes_per_axis_setpoints():
+    sim = swingrt.Simulator(duration=100.0)
+    sim.set_setpoint(n=("acc", 0.0), e=("vel", 1.0), d=("pos", -12.0))
+    sim.advance(8.0)
+    s = sim.state()
+    assert s["t"] == pytest.approx(8.0)
+    assert s["ve"] == pytest.approx(1.0, abs=0.05)
+    assert s["pd"] == pytest.approx(-12.0, abs=0.1)
+    assert s["acc_sp_n"] == 0.0
+    with pytest.raises(ConfigError, match="mode"):
+        sim.set_setpoint(n=("jerk", 1.0))
+    with pytest.raises(ConfigError, match="axis"):
+        sim.set_setpoint(x=("vel", 1.0))
+    with pytest.raises(ConfigError, match="dt"):
+        sim.advance(float("nan"))
+    assert len(sim.trace()) == 800  # samples at 0, 0.01, …, 7.99 s
+
+
+@pytest.mark.parametrize(
+    ("text", "field"),
+    [
+        ("[payload]\nmasss = 0.2\n", "payload.masss"),
+        ("[payload]\nmass = -0.1\n", "payload.mass"),
+        ("[payload]\nlength = 0.0\n", "payload.length"),
+        ("duration = nan\n", "duration"),
+        (
+            "[wind]\nsteps = [{ t = 1.0, velocity = [1.0, nan, 0.0] }]\n",
+            "wind.steps[0].velocity[1]",
+        ),
+        ("[vehicle]\ninertia = [1e-3, 1e-3]\n", "vehicle.inertia"),
+        ("[[setpoints]]\nt = 1.0\nvn = 1.0\nan = 0.5\n", "setpoints[0].an"),
+        ("[controller]\nrate_loop_hz = 300.0\n", "controller.rate_loop_hz"),
+        ("[payload]\nkind = 'triple'\n", "payload.kind"),
+        ("[payload\nmass = 1\n", "bad.toml"),
+    ],
+)
+def test_bad_scenarios_name_the_field_from_python_and_cli(tmp_path, cli, text, field):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as exc:
+        swingrt.simulate(path)
+    assert field in str(exc.value)
+    assert isinstance(exc.value, ValueError) and isinstance(exc.value, SwingrtError)
+    out = tmp_path / "out.parquet"
+    r = cli("simulate", path, "-o", out)
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("swingrt: error:") and field in lines[0]
+    assert "Traceback" not in r.stderr
+    assert not out.exists() and list(tmp_path.iterdir()) == [path]
+
+
+def test_cli_simulate_writes_trace_and_summary(tmp_path, cli):
+    out = tmp_path / "trace.parquet"
+    r = cli("simulate", "--duration", "12", "-o", out)
+    assert r.returncode == 0, r.stderr
+    assert "peak swing" in r.stdout and "overshoot" in r.stdout
+    tr = swingrt.Trace.from_parquet(out)
+    assert tr.t[-1] == pytest.approx(12.0)
+
+
+def test_cli_rejects_bad_output_and_missing_file(tmp_path, cli):
+    r = cli("simulate", "-o", tmp_path / "x.txt")
+    assert r.returncode == 2 and "parquet" in r.stderr
+    r = cli("simulate", tmp_path / "missing.toml")
+    assert r.returncode == 2 and "missing.toml" in r.stderr
+
+
+def test_summary_metrics_match_hand_computation():
+    t = np.arange(0, 10.0001, 0.01)
+    step = t >= 2.0
+    vn = np.where(step, 2.0 * (1 - np.exp(-(t - 2.0))), 0.0)
+    swing = np.where(step, np.radians(5.0) * np.exp(-(t - 2.0)), 0.0)
+    z = np.zeros_like(t)
+    cols = dict(t=t, vn=vn, ve=z, swing_n=swing, swing_e=z, acc_sp_n=z, acc_sp_e=z)
+    cols.update(vel_sp_n=np.where(step, 2.0, 0.0), vel_sp_e=z)
+    m = swingrt.step_metrics(swingrt.Trace(cols), t0=2.0)
+    assert m["peak_swing_deg"] == pytest.approx(5.0, rel=1e-9)
+    # |swing| < 1° from t − 2 = ln 5 on.
+    assert m["swing_settle_s"] == pytest.approx(math.log(5.0), abs=0.011)
+    # IAE of 5° e^{−t} over 8 s minus the final value offset (tiny).
+    assert m["swing_iae_deg_s"] == pytest.approx(5.0 * (1 - math.exp(-8.0)), rel=0.02)
+    assert m["overshoot_pct"] == 0.0
+    assert m["v_settle_s"] == pytest.approx(math.log(20.0), abs=0.011)
