@@ -882,3 +882,22 @@ fn tuning_report() {
         }
     }
 }
+
+#[test]
+fn a_horizon_shorter_than_the_swing_period_underdamps_a_two_metre_cable() {
+    // Issue 4: with one fixed tuning, the prediction horizon must span a swing period of
+    // the longest cable (≈ 2.5–2.8 s for 2 m); 1.8 s (60 ticks) leaves it under-damped.
+    let p = params(0.1, 2.0);
+    let m = model(0.1, 2.0, 2);
+    let iae = |np: usize| {
+        let s = MpcSettings {
+            horizon: np,
+            ..Default::default()
+        };
+        let mut c = MpcController::new(&m, s).unwrap();
+        let (_, ss, _) = simulate_pendulum(p, &mut c, 2.0, 15.0, 0.0);
+        ss.iter().map(|x| x.abs()).sum::<f64>() * TS
+    };
+    let (long, short) = (iae(100), iae(60));
+    assert!(long < 0.75 * short, "IAE Np=100 {long} vs Np=60 {short}");
+}
