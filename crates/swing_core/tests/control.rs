@@ -457,10 +457,7 @@ fn active_bounds_are_respected_and_both_solvers_agree() {
             &[0.0],
             600,
         );
-        assert!(
-            kinds.iter().any(|k| *k == TickKind::Constrained),
-            "bound never active"
-        );
+        assert!(kinds.contains(&TickKind::Constrained), "bound never active");
         let mut prev = 0.0;
         for u in &us {
             assert!(u[0].abs() <= 1.0 + 1e-6, "|u| = {}", u[0]);
@@ -479,7 +476,10 @@ fn active_bounds_are_respected_and_both_solvers_agree() {
         .zip(&results[1])
         .map(|(a, b)| (a[0] - b[0]).abs())
         .fold(0.0, f64::max);
-    assert!(worst < 1e-5, "Clarabel and active set differ by {worst}");
+    // Clarabel stops at interior-point tolerance (~1e-8 per QP); in closed loop over 600
+    // ticks those differences feed back, so compare trajectories at 1e-4 (single QPs are
+    // compared at 1e-6 with a KKT certificate in the active-set unit tests).
+    assert!(worst < 1e-4, "Clarabel and active set differ by {worst}");
 }
 
 #[test]
@@ -705,4 +705,199 @@ fn predicted_trajectory_matches_an_open_loop_rollout() {
             "rate at {i}"
         );
     }
+}
+
+// ------------------------------------------------- no allocation per tick
+
+mod counting {
+    use std::alloc::{GlobalAlloc, Layout, System};
+    use std::cell::Cell;
+
+    thread_local! {
+        static COUNTING: Cell<bool> = const { Cell::new(false) };
+        static COUNT: Cell<usize> = const { Cell::new(0) };
+    }
+
+    pub struct Counter;
+
+    unsafe impl GlobalAlloc for Counter {
+        unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+            let _ = COUNTING.try_with(|c| {
+                if c.get() {
+                    let _ = COUNT.try_with(|n| n.set(n.get() + 1));
+                }
+            });
+            unsafe { System.alloc(layout) }
+        }
+        unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+            unsafe { System.dealloc(ptr, layout) }
+        }
+        unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+            let _ = COUNTING.try_with(|c| {
+                if c.get() {
+                    let _ = COUNT.try_with(|n| n.set(n.get() + 1));
+                }
+            });
+            unsafe { System.realloc(ptr, layout, new_size) }
+        }
+    }
+
+    /// Allocations made on this thread while running `f`.
+    pub fn count<F: FnOnce()>(f: F) -> usize {
+        COUNT.with(|n| n.set(0));
+        COUNTING.with(|c| c.set(true));
+        f();
+        COUNTING.with(|c| c.set(false));
+        COUNT.with(|n| n.get())
+    }
+}
+
+#[global_allocator]
+static ALLOC: counting::Counter = counting::Counter;
+
+#[test]
+fn mpc_and_lqr_ticks_allocate_nothing() {
+    // The counter does see allocations.
+    assert!(counting::count(|| drop(std::hint::black_box(vec![1.0f64; 10]))) > 0);
+    let m = model(0.3, 2.0, 4);
+    for (s, must_constrain) in [
+        (
+            MpcSettings {
+                acc_max: None,
+                ..Default::default()
+            },
+            false,
+        ),
+        (
+            MpcSettings {
+                acc_max: Some(1.0),
+                jerk_max: Some(20.0),
+                solver: QpSolverKind::ActiveSet,
+                ..Default::default()
+            },
+            true,
+        ),
+    ] {
+        let mut ctrl = MpcController::new(&m, s).unwrap();
+        let mut plant = LinearPlant::new(&m);
+        ctrl.reset(&plant.state(), &[0.0]);
+        let mut constrained = 0;
+        for k in 0..300 {
+            let st = plant.state();
+            let r = [if (k / 100) % 2 == 0 { 4.0 } else { -4.0 }];
+            let mut u = [0.0];
+            let mut info = None;
+            let n = counting::count(|| info = Some(ctrl.step(&st, &r, &mut u).unwrap()));
+            assert_eq!(n, 0, "tick {k} allocated {n} times");
+            if info.unwrap().kind == TickKind::Constrained {
+                constrained += 1;
+            }
+            plant.step(&u, &[0.0]);
+        }
+        assert_eq!(constrained > 0, must_constrain);
+    }
+    let mut lqr = LqrController::new(params(0.2, 1.0), 2, LqrSettings::default()).unwrap();
+    let st = [AxisState::default(); 2];
+    let mut u = [0.0; 2];
+    let n = counting::count(|| {
+        for _ in 0..100 {
+            lqr.step(&st, &[1.0, -1.0], &mut u).unwrap();
+        }
+    });
+    assert_eq!(n, 0);
+}
+
+/// Tuning table (run with `--ignored --nocapture`): 2 m/s step on the exact pendulum for
+/// the seed's payload range, MPC weight sets and the LQR for reference.
+#[test]
+#[ignore]
+fn tuning_report() {
+    let sets: Vec<(&str, MpcSettings)> = vec![
+        ("default", MpcSettings::default()),
+        (
+            "sr1",
+            MpcSettings {
+                w_swing_rate: 1.0,
+                ..Default::default()
+            },
+        ),
+        (
+            "sr3",
+            MpcSettings {
+                w_swing_rate: 3.0,
+                ..Default::default()
+            },
+        ),
+        (
+            "sr2 du0.7",
+            MpcSettings {
+                w_acc_rate: 0.7,
+                ..Default::default()
+            },
+        ),
+        (
+            "sr2 du1.5",
+            MpcSettings {
+                w_acc_rate: 1.5,
+                ..Default::default()
+            },
+        ),
+        (
+            "sr2 Np70",
+            MpcSettings {
+                horizon: 70,
+                ..Default::default()
+            },
+        ),
+    ];
+    let metrics = |vs: &[f64], ss: &[f64], dt: f64| {
+        let peak = ss.iter().map(|x| x.abs()).fold(0.0, f64::max).to_degrees();
+        let iae = ss.iter().map(|x| x.abs()).sum::<f64>() * dt * 57.2958;
+        let rise = vs
+            .iter()
+            .position(|v| *v >= 1.8)
+            .map(|k| k as f64 * dt)
+            .unwrap_or(f64::NAN);
+        let over = (vs.iter().cloned().fold(f64::MIN, f64::max) - 2.0) / 2.0 * 100.0;
+        let settle = ss
+            .iter()
+            .rposition(|x| x.abs() > 1f64.to_radians())
+            .map(|k| (k + 1) as f64 * dt)
+            .unwrap_or(0.0);
+        format!("peak {peak:5.1}°  IAE {iae:6.2}°s  rise90 {rise:5.2}s  overshoot {over:5.1}%  swing<1° after {settle:5.2}s")
+    };
+    for l in [0.5, 1.0, 2.0] {
+        for m_p in [0.1, 0.3] {
+            let p = params(m_p, l);
+            let m = model(m_p, l, 2);
+            println!("l = {l} m, m_p = {m_p} kg");
+            for (name, s) in &sets {
+                let mut c = MpcController::new(&m, s.clone()).unwrap();
+                let (vs, ss, _) = simulate_pendulum(p, &mut c, 2.0, 15.0, 0.0);
+                println!("  MPC {name:<18} {}", metrics(&vs, &ss, TS));
+            }
+            let mut lqr = LqrController::new(p, 1, LqrSettings::default()).unwrap();
+            let (vs, ss, _) = simulate_pendulum(p, &mut lqr, 2.0, 15.0, 0.0);
+            println!("  LQR {:<18} {}", "seed weights", metrics(&vs, &ss, 0.02));
+        }
+    }
+}
+
+#[test]
+fn a_horizon_shorter_than_the_swing_period_underdamps_a_two_metre_cable() {
+    // Issue 4: with one fixed tuning, the prediction horizon must span a swing period of
+    // the longest cable (≈ 2.5–2.8 s for 2 m); 1.8 s (60 ticks) leaves it under-damped.
+    let p = params(0.1, 2.0);
+    let m = model(0.1, 2.0, 2);
+    let iae = |np: usize| {
+        let s = MpcSettings {
+            horizon: np,
+            ..Default::default()
+        };
+        let mut c = MpcController::new(&m, s).unwrap();
+        let (_, ss, _) = simulate_pendulum(p, &mut c, 2.0, 15.0, 0.0);
+        ss.iter().map(|x| x.abs()).sum::<f64>() * TS
+    };
+    let (long, short) = (iae(100), iae(60));
+    assert!(long < 0.75 * short, "IAE Np=100 {long} vs Np=60 {short}");
 }

@@ -1,8 +1,403 @@
-//! Bindings of `swing_core::control`.
+//! Bindings of `swing_core::control`: the MPC and LQR controllers, the Riccati solvers and
+//! the MPC tick timing used by `swingrt bench`.
+//!
+//! Model JSON (`swingrt-model/1`, DESIGN §7) is read by `LinearModel::from_json`.
+//! Settings dicts are turned into JSON and read by the core's serde structs, so unknown
+//! keys and bad values raise `swingrt.errors.ConfigError` naming the field.
 
+use nalgebra::DMatrix;
+use numpy::{
+    PyArray1, PyArrayMethods, PyReadonlyArray2, PyReadonlyArrayDyn, PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use serde::Deserialize;
+use swing_core::control::lqr::{self, LqrController, LqrSettings, PendulumParams};
+use swing_core::control::mpc::timing::tick_timing;
+use swing_core::control::mpc::{MpcController, MpcSettings};
+use swing_core::control::{AxisState, ControlError, SwingController, TickInfo, TickKind};
+use swing_core::sysid::LinearModel;
+use swing_core::ConfigError;
+
+use crate::errors::to_py;
+
+/// Parse a `swingrt-model/1` JSON text with the core's reader.
+fn parse_model(text: &str) -> PyResult<LinearModel> {
+    LinearModel::from_json(text).map_err(to_py)
+}
+
+/// A settings dict (or None) → settings struct through JSON and serde.
+fn settings_from<T: for<'de> Deserialize<'de> + Default>(
+    py: Python<'_>,
+    settings: Option<&Bound<'_, PyDict>>,
+) -> PyResult<T> {
+    match settings {
+        None => Ok(T::default()),
+        Some(d) => {
+            let text: String = py.import("json")?.call_method1("dumps", (d,))?.extract()?;
+            serde_json::from_str(&text)
+                .map_err(|e| to_py(ConfigError::new("settings", e.to_string())))
+        }
+    }
+}
+
+/// Read a state array of shape (axes, 3) — or (3,) for one axis — of [v, swing, swing_rate].
+fn read_state(arr: &PyReadonlyArrayDyn<'_, f64>, axes: usize) -> PyResult<Vec<AxisState>> {
+    let shape = arr.shape().to_vec();
+    let ok = (shape == [axes, 3]) || (axes == 1 && shape == [3]);
+    if !ok {
+        return Err(to_py(ControlError::Input(format!(
+            "state must have shape ({axes}, 3) [v, swing, swing_rate], got {shape:?}"
+        ))));
+    }
+    let view = arr.as_array();
+    let flat: Vec<f64> = view.iter().copied().collect();
+    Ok((0..axes)
+        .map(|a| AxisState {
+            v: flat[3 * a],
+            swing: flat[3 * a + 1],
+            swing_rate: flat[3 * a + 2],
+        })
+        .collect())
+}
+
+/// A float or a sequence of floats of length `axes`.
+fn read_vec(obj: &Bound<'_, PyAny>, axes: usize, what: &str) -> PyResult<Vec<f64>> {
+    let v: Vec<f64> = match obj.extract::<f64>() {
+        Ok(x) => vec![x],
+        Err(_) => obj.extract::<Vec<f64>>()?,
+    };
+    if v.len() != axes {
+        return Err(to_py(ControlError::Input(format!(
+            "{what} needs {axes} value(s), got {}",
+            v.len()
+        ))));
+    }
+    Ok(v)
+}
+
+fn tick_dict<'py>(py: Python<'py>, info: TickInfo) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    let kind = match info.kind {
+        TickKind::Unconstrained => "unconstrained",
+        TickKind::Constrained => "constrained",
+    };
+    d.set_item("kind", kind)?;
+    d.set_item("iterations", info.iterations)?;
+    Ok(d)
+}
+
+fn step_any(
+    ctrl: &mut dyn SwingController,
+    state: &PyReadonlyArrayDyn<'_, f64>,
+    vel_ref: &Bound<'_, PyAny>,
+) -> PyResult<(Vec<f64>, TickInfo)> {
+    let axes = ctrl.axes();
+    let st = read_state(state, axes)?;
+    let r = read_vec(vel_ref, axes, "vel_ref")?;
+    let mut out = vec![0.0; axes];
+    let info = ctrl.step(&st, &r, &mut out).map_err(to_py)?;
+    Ok((out, info))
+}
+
+fn reset_any(
+    ctrl: &mut dyn SwingController,
+    state: &PyReadonlyArrayDyn<'_, f64>,
+    acc: Option<&Bound<'_, PyAny>>,
+) -> PyResult<()> {
+    let axes = ctrl.axes();
+    let st = read_state(state, axes)?;
+    let a = match acc {
+        Some(obj) => read_vec(obj, axes, "acc")?,
+        None => vec![0.0; axes],
+    };
+    ctrl.reset(&st, &a);
+    Ok(())
+}
+
+/// The data-driven MPC on an identified model (JSON text) with optional settings dict.
+#[pyclass(name = "Mpc", module = "swingrt._core", unsendable)]
+pub struct PyMpc {
+    inner: MpcController,
+    last: TickInfo,
+}
+
+#[pymethods]
+impl PyMpc {
+    #[new]
+    #[pyo3(signature = (model_json, settings=None))]
+    fn new(
+        py: Python<'_>,
+        model_json: &str,
+        settings: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        let model = parse_model(model_json)?;
+        let s: MpcSettings = settings_from(py, settings)?;
+        let inner = py.detach(|| MpcController::new(&model, s)).map_err(to_py)?;
+        Ok(Self {
+            inner,
+            last: TickInfo::default(),
+        })
+    }
+
+    /// One tick: state (axes × [v, swing, swing_rate]) and velocity reference in,
+    /// acceleration setpoint per axis [m/s²] out.
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        state: PyReadonlyArrayDyn<'py, f64>,
+        vel_ref: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let (out, info) = step_any(&mut self.inner, &state, vel_ref)?;
+        self.last = info;
+        Ok(PyArray1::from_vec(py, out))
+    }
+
+    /// Restart from a measured state and acceleration setpoint (bumpless transfer).
+    #[pyo3(signature = (state, acc=None))]
+    fn reset(
+        &mut self,
+        state: PyReadonlyArrayDyn<'_, f64>,
+        acc: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        reset_any(&mut self.inner, &state, acc)
+    }
+
+    /// Predicted outputs of the last tick: array (Np, axes, 3) of [v, swing_rate, swing].
+    fn predicted<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let axes = self.inner.axes();
+        let np = self.inner.settings().horizon;
+        let v = self.inner.predicted_trajectory().to_vec();
+        Ok(PyArray1::from_vec(py, v).reshape([np, axes, 3])?.into_any())
+    }
+
+    /// The optimal input sequence of the last tick, array (Nc, axes) [m/s²].
+    fn predicted_inputs<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let axes = self.inner.axes();
+        let nc = self.inner.settings().control_horizon;
+        let v = self.inner.predicted_inputs().to_vec();
+        Ok(PyArray1::from_vec(py, v).reshape([nc, axes])?.into_any())
+    }
+
+    /// Estimated disturbances after the last tick (layout of the `disturbance` setting).
+    fn disturbance<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(py, self.inner.disturbance().to_vec())
+    }
+
+    /// What the last tick did: {"kind": "unconstrained"|"constrained", "iterations": n}.
+    fn last_tick<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        tick_dict(py, self.last)
+    }
+
+    /// Tick period [s] (the model's dt).
+    #[getter]
+    fn period(&self) -> f64 {
+        self.inner.period()
+    }
+
+    /// Number of controlled axes.
+    #[getter]
+    fn axes(&self) -> usize {
+        self.inner.axes()
+    }
+
+    /// The settings in use, as a dict.
+    fn settings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let text = serde_json::to_string(self.inner.settings()).expect("settings serialise");
+        py.import("json")?.call_method1("loads", (text,))
+    }
+}
+
+/// The baseline LQR (thesis 5.3) for the given payload parameters.
+#[pyclass(name = "Lqr", module = "swingrt._core", unsendable)]
+pub struct PyLqr {
+    inner: LqrController,
+}
+
+#[pymethods]
+impl PyLqr {
+    #[new]
+    #[pyo3(signature = (m_q, m_p, l, c=0.0, axes=1, settings=None))]
+    fn new(
+        py: Python<'_>,
+        m_q: f64,
+        m_p: f64,
+        l: f64,
+        c: f64,
+        axes: usize,
+        settings: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        let s: LqrSettings = settings_from(py, settings)?;
+        let p = PendulumParams { m_q, m_p, l, c };
+        Ok(Self {
+            inner: LqrController::new(p, axes, s).map_err(to_py)?,
+        })
+    }
+
+    /// One tick: state (axes × [v, swing, swing_rate]) and velocity reference in,
+    /// acceleration setpoint per axis [m/s²] out.
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        state: PyReadonlyArrayDyn<'py, f64>,
+        vel_ref: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let (out, _) = step_any(&mut self.inner, &state, vel_ref)?;
+        Ok(PyArray1::from_vec(py, out))
+    }
+
+    /// Restart from a measured state and acceleration setpoint (bumpless transfer).
+    #[pyo3(signature = (state, acc=None))]
+    fn reset(
+        &mut self,
+        state: PyReadonlyArrayDyn<'_, f64>,
+        acc: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        reset_any(&mut self.inner, &state, acc)
+    }
+
+    /// Gain K on [∫(v_sp − v), v, θ, θ̇] (u = K(x_sp − x) with the sign convention u = −Kx).
+    fn gain<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(py, self.inner.gain().to_vec())
+    }
+
+    /// Tick period [s].
+    #[getter]
+    fn period(&self) -> f64 {
+        self.inner.period()
+    }
+
+    /// Number of controlled axes.
+    #[getter]
+    fn axes(&self) -> usize {
+        self.inner.axes()
+    }
+}
+
+fn to_dmatrix(name: &str, a: &PyReadonlyArray2<'_, f64>) -> PyResult<DMatrix<f64>> {
+    let shape = a.shape();
+    let view = a.as_array();
+    let m = DMatrix::from_fn(shape[0], shape[1], |i, j| view[[i, j]]);
+    if m.iter().any(|x| !x.is_finite()) {
+        return Err(to_py(ControlError::Input(format!(
+            "{name} has a non-finite entry"
+        ))));
+    }
+    Ok(m)
+}
+
+fn to_numpy<'py>(py: Python<'py>, m: &DMatrix<f64>) -> PyResult<Bound<'py, PyAny>> {
+    let (r, c) = m.shape();
+    let mut v = Vec::with_capacity(r * c);
+    for i in 0..r {
+        for j in 0..c {
+            v.push(m[(i, j)]);
+        }
+    }
+    Ok(PyArray1::from_vec(py, v).reshape([r, c])?.into_any())
+}
+
+type Riccati = fn(
+    &DMatrix<f64>,
+    &DMatrix<f64>,
+    &DMatrix<f64>,
+    &DMatrix<f64>,
+) -> Result<lqr::RiccatiSolution, ControlError>;
+
+fn riccati<'py>(
+    py: Python<'py>,
+    solve: Riccati,
+    a: PyReadonlyArray2<'py, f64>,
+    b: PyReadonlyArray2<'py, f64>,
+    q: PyReadonlyArray2<'py, f64>,
+    r: PyReadonlyArray2<'py, f64>,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    let (a, b, q, r) = (
+        to_dmatrix("A", &a)?,
+        to_dmatrix("B", &b)?,
+        to_dmatrix("Q", &q)?,
+        to_dmatrix("R", &r)?,
+    );
+    let sol = py.detach(|| solve(&a, &b, &q, &r)).map_err(to_py)?;
+    Ok((to_numpy(py, &sol.k)?, to_numpy(py, &sol.p)?))
+}
+
+/// Continuous algebraic Riccati equation: returns (K, P) with u = −Kx.
+#[pyfunction]
+fn care<'py>(
+    py: Python<'py>,
+    a: PyReadonlyArray2<'py, f64>,
+    b: PyReadonlyArray2<'py, f64>,
+    q: PyReadonlyArray2<'py, f64>,
+    r: PyReadonlyArray2<'py, f64>,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    riccati(py, lqr::care, a, b, q, r)
+}
+
+/// Discrete algebraic Riccati equation: returns (K, P) with u = −Kx.
+#[pyfunction]
+fn dare<'py>(
+    py: Python<'py>,
+    a: PyReadonlyArray2<'py, f64>,
+    b: PyReadonlyArray2<'py, f64>,
+    q: PyReadonlyArray2<'py, f64>,
+    r: PyReadonlyArray2<'py, f64>,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    riccati(py, lqr::dare, a, b, q, r)
+}
+
+/// Time `n_ticks` MPC ticks in Rust (closed loop on the model itself; constrained: only
+/// ticks that solved the QP): {"median", "p99", "max", "mean" [µs], "ticks"}.
+#[pyfunction]
+#[pyo3(signature = (model_json, settings=None, n_ticks=2000, constrained=false))]
+fn mpc_tick_timing<'py>(
+    py: Python<'py>,
+    model_json: &str,
+    settings: Option<&Bound<'py, PyDict>>,
+    n_ticks: usize,
+    constrained: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let model = parse_model(model_json)?;
+    let s: MpcSettings = settings_from(py, settings)?;
+    let t = py
+        .detach(|| tick_timing(&model, &s, n_ticks, constrained))
+        .map_err(to_py)?;
+    let d = PyDict::new(py);
+    d.set_item("median", t.median_us)?;
+    d.set_item("p99", t.p99_us)?;
+    d.set_item("max", t.max_us)?;
+    d.set_item("mean", t.mean_us)?;
+    d.set_item("ticks", t.ticks)?;
+    Ok(d)
+}
+
+/// The white-box pendulum fitted in `delays` delay coordinates (seeded), as model JSON:
+/// a realistic stand-in for an identified model in benchmarks and tests.
+#[pyfunction]
+#[pyo3(signature = (m_q=0.952, m_p=0.2, l=1.0, c=0.002, dt=0.03, delays=50, axes=1, seed=7))]
+#[allow(clippy::too_many_arguments)]
+fn pendulum_model_json(
+    m_q: f64,
+    m_p: f64,
+    l: f64,
+    c: f64,
+    dt: f64,
+    delays: usize,
+    axes: usize,
+    seed: u64,
+) -> PyResult<String> {
+    let p = PendulumParams { m_q, m_p, l, c };
+    let m = lqr::pendulum_delay_model(&p, dt, delays, axes, seed).map_err(to_py)?;
+    m.to_json().map_err(to_py)
+}
 
 /// Register this domain's functions and classes on the module.
-pub fn register(_m: &Bound<'_, PyModule>) -> PyResult<()> {
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyMpc>()?;
+    m.add_class::<PyLqr>()?;
+    m.add_function(wrap_pyfunction!(care, m)?)?;
+    m.add_function(wrap_pyfunction!(dare, m)?)?;
+    m.add_function(wrap_pyfunction!(mpc_tick_timing, m)?)?;
+    m.add_function(wrap_pyfunction!(pendulum_model_json, m)?)?;
     Ok(())
 }

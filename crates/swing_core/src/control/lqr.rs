@@ -196,7 +196,7 @@ pub fn care(
     let res = a.transpose() * &p + &p * a - &p * &g * &p + q;
     let residual =
         res.norm() / (1.0 + q.norm() + 2.0 * (a.norm() * p.norm()) + (&p * &g * &p).norm());
-    if !(residual <= RESIDUAL_TOL) {
+    if residual.is_nan() || residual > RESIDUAL_TOL {
         return Err(ControlError::Synthesis(format!(
             "CARE residual {residual:.3e} exceeds {RESIDUAL_TOL:.0e}"
         )));
@@ -300,7 +300,7 @@ pub fn dare_with_cross(
     // Residual of the original (cross-term) equation.
     let res = a.transpose() * &p * a - &p - (a.transpose() * &p * b + cross) * &k + q;
     let residual = res.norm() / (1.0 + q.norm() + p.norm() * (1.0 + a.norm() * a.norm()));
-    if !(residual <= RESIDUAL_TOL) {
+    if residual.is_nan() || residual > RESIDUAL_TOL {
         return Err(ControlError::Synthesis(format!(
             "DARE residual {residual:.3e} exceeds {RESIDUAL_TOL:.0e}"
         )));
@@ -529,6 +529,48 @@ impl PendulumParams {
             fingerprint: String::new(),
             diagnostics: Default::default(),
         })
+    }
+}
+
+/// [`PendulumParams::delay_model`] for `axes` = 1 or 2 identical decoupled axes: for two
+/// axes the frame is [vn, ve, swing_n, swing_e] and the inputs `acc_sp_n`, `acc_sp_e`.
+pub fn pendulum_delay_model(
+    params: &PendulumParams,
+    dt: f64,
+    delays: usize,
+    axes: usize,
+    seed: u64,
+) -> Result<LinearModel, ControlError> {
+    let one = params.delay_model(dt, delays, seed)?;
+    match axes {
+        1 => Ok(one),
+        2 => {
+            let nz = 4 * delays;
+            let mut a = DMatrix::zeros(nz, nz);
+            let mut b = DMatrix::zeros(nz, 2);
+            // one-axis index k = 2·frame + (0: v, 1: swing) → two-axis 4·frame + 2·kind + axis
+            let map = |axis: usize, k: usize| (k / 2) * 4 + (k % 2) * 2 + axis;
+            for axis in 0..2 {
+                for i in 0..2 * delays {
+                    for j in 0..2 * delays {
+                        a[(map(axis, i), map(axis, j))] = one.a[(i, j)];
+                    }
+                    b[(map(axis, i), axis)] = one.b[(i, 0)];
+                }
+            }
+            Ok(LinearModel {
+                states: vec!["vn".into(), "ve".into(), "swing_n".into(), "swing_e".into()],
+                inputs: vec!["acc_sp_n".into(), "acc_sp_e".into()],
+                input_mean: vec![0.0; 2],
+                a,
+                b,
+                c: DVector::zeros(nz),
+                ..one
+            })
+        }
+        _ => Err(ControlError::Model(format!(
+            "axes must be 1 or 2 (got {axes})"
+        ))),
     }
 }
 

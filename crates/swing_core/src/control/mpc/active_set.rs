@@ -150,10 +150,11 @@ impl ActiveSetQp {
                         "active set: iteration limit reached".into(),
                     ));
                 }
-                // 2. d = Jᵀ n_p, z = J₂ d₂, r = R⁻¹ d₁.
+                // 2. d = Jᵀ n_p (n_p has at most two non-zeros), z = J₂ d₂, r = R⁻¹ d₁.
+                let [(c0, v0), (c1, v1)] = self.rows[p];
                 for k in 0..n {
                     let col = &self.jm[k * n..(k + 1) * n];
-                    self.d[k] = col.iter().zip(&self.np_vec).map(|(a, b)| a * b).sum();
+                    self.d[k] = -(v0 * col[c0] + v1 * col[c1]);
                 }
                 self.z.fill(0.0);
                 for k in q..n {
@@ -280,5 +281,142 @@ impl ActiveSetQp {
                 *x2 = -s * t1 + c * t2;
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::qp::ClarabelQp;
+    use super::*;
+    use nalgebra::DVector;
+
+    /// A seeded SPD Hessian of the MPC's shape (m·Nc) and a gradient.
+    fn problem(m: usize, nc: usize, seed: u64) -> (DMatrix<f64>, DVector<f64>) {
+        let n = m * nc;
+        let mut s = seed;
+        let mut rnd = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 11) as f64 / (1u64 << 53) as f64) - 0.5
+        };
+        let x = DMatrix::from_fn(n, n, |_, _| rnd());
+        let h = &x * x.transpose() + DMatrix::identity(n, n) * 0.5;
+        let f = DVector::from_fn(n, |_, _| 20.0 * rnd());
+        (h, f)
+    }
+
+    /// KKT certificate: feasibility, complementary slackness and λ ≥ 0 with
+    /// Hx + f + Gᵀλ = 0 solved by least squares on the active rows.
+    fn kkt_error(
+        h: &DMatrix<f64>,
+        f: &DVector<f64>,
+        g: &DMatrix<f64>,
+        rhs: &[f64],
+        x: &DVector<f64>,
+    ) -> f64 {
+        let slack: Vec<f64> = (0..g.nrows())
+            .map(|i| rhs[i] - g.row(i).dot(&x.transpose()))
+            .collect();
+        let infeas = slack.iter().fold(0.0f64, |a, s| a.max(-s));
+        let active: Vec<usize> = (0..g.nrows()).filter(|&i| slack[i].abs() < 1e-7).collect();
+        let grad = h * x + f;
+        if active.is_empty() {
+            return infeas.max(grad.amax());
+        }
+        let ga = DMatrix::from_fn(active.len(), g.ncols(), |r, c| g[(active[r], c)]);
+        let lam = ga
+            .transpose()
+            .svd(true, true)
+            .solve(&(-&grad), 1e-12)
+            .unwrap();
+        let stationarity = (ga.transpose() * &lam + &grad).amax();
+        let dual_infeas = lam.iter().fold(0.0f64, |a, l| a.max(-l));
+        infeas.max(stationarity).max(dual_infeas)
+    }
+
+    #[test]
+    fn active_set_meets_kkt_and_agrees_with_clarabel() {
+        for (m, nc, seed) in [(1, 20, 1), (2, 20, 2), (1, 5, 3), (2, 8, 4)] {
+            let (h, f) = problem(m, nc, seed);
+            let bounds = Bounds {
+                u_max: Some(1.0),
+                du_max: Some(0.4),
+            };
+            let u_prev = vec![0.3; m];
+            let x_unc = -h.clone().cholesky().unwrap().solve(&f);
+            let mut as_qp = ActiveSetQp::new(&h, bounds, m, nc).unwrap();
+            let mut x = vec![0.0; m * nc];
+            as_qp
+                .solve(f.as_slice(), x_unc.as_slice(), &u_prev, &mut x)
+                .unwrap();
+            let g = constraint_rows(&bounds, m, nc);
+            let mut rhs = vec![0.0; g.nrows()];
+            fill_rhs(&bounds, m, nc, &u_prev, &mut rhs);
+            let xv = DVector::from_vec(x.clone());
+            assert!(
+                bounds.violated(x_unc.as_slice(), &u_prev, 1e-9),
+                "test needs active bounds"
+            );
+            let err = kkt_error(&h, &f, &g, &rhs, &xv);
+            assert!(err < 1e-8, "KKT error {err}");
+            let mut cl = ClarabelQp::new(&h, bounds, m, nc).unwrap();
+            let mut xc = vec![0.0; m * nc];
+            cl.solve(f.as_slice(), &u_prev, &mut xc).unwrap();
+            let diff = x
+                .iter()
+                .zip(&xc)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            assert!(diff < 1e-6, "active set vs Clarabel differ by {diff}");
+        }
+    }
+
+    #[test]
+    fn inactive_bounds_return_the_unconstrained_minimiser_exactly() {
+        let (h, f) = problem(1, 10, 9);
+        let x_unc = -h.clone().cholesky().unwrap().solve(&f);
+        let big = x_unc.amax() * 10.0 + 1.0;
+        let bounds = Bounds {
+            u_max: Some(big),
+            du_max: Some(2.0 * big),
+        };
+        let mut qp = ActiveSetQp::new(&h, bounds, 1, 10).unwrap();
+        let mut x = vec![0.0; 10];
+        let iters = qp
+            .solve(f.as_slice(), x_unc.as_slice(), &[0.0], &mut x)
+            .unwrap();
+        assert_eq!(iters, 0);
+        assert_eq!(x.as_slice(), x_unc.as_slice());
+        // Clarabel reaches the same point to interior-point accuracy.
+        let mut cl = ClarabelQp::new(&h, bounds, 1, 10).unwrap();
+        let mut xc = vec![0.0; 10];
+        cl.solve(f.as_slice(), &[0.0], &mut xc).unwrap();
+        let diff = x
+            .iter()
+            .zip(&xc)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(diff < 1e-6, "{diff}");
+    }
+
+    #[test]
+    fn infeasible_bounds_are_a_solver_error() {
+        // u_prev = 3 with |u| ≤ 1 and |Δu| ≤ 0.5: no feasible first move.
+        let (h, f) = problem(1, 4, 5);
+        let bounds = Bounds {
+            u_max: Some(1.0),
+            du_max: Some(0.5),
+        };
+        let x_unc = -h.clone().cholesky().unwrap().solve(&f);
+        let mut qp = ActiveSetQp::new(&h, bounds, 1, 4).unwrap();
+        let mut x = vec![0.0; 4];
+        let r = qp.solve(f.as_slice(), x_unc.as_slice(), &[3.0], &mut x);
+        assert!(matches!(r, Err(ControlError::Solver(_))));
+        let mut cl = ClarabelQp::new(&h, bounds, 1, 4).unwrap();
+        assert!(matches!(
+            cl.solve(f.as_slice(), &[3.0], &mut x),
+            Err(ControlError::Solver(_))
+        ));
     }
 }

@@ -19,8 +19,10 @@
 //!
 //! **Cost** (eq. 5.28–5.31, the MPC Toolbox form the seed uses), decision U = [u₀ … u_{Nc−1}],
 //! u_j = u_{Nc−1} for j ≥ Nc (eq. 5.22):
+//! ```text
 //! J = Σ_{i=1}^{Np} ‖W_y (r_{k+i} − y_{k+i})‖² + Σ_{i=0}^{Np−1} ‖W_u (u_{k+i} − u_ss)‖²
 //!   + Σ_{i=0}^{Nc−1} ‖W_Δu (u_{k+i} − u_{k+i−1})‖²,
+//! ```
 //! with references v_ref (held over the horizon), ṡ_ref = 0, s_ref = s_ss and input target
 //! u_ss, where (z_ss, u_ss) is the steady state of the augmented model with v = v_ref at the
 //! current disturbance estimate (target calculation; it keeps an input weight from

@@ -16,6 +16,7 @@ pub mod active_set;
 pub mod condense;
 pub mod estimator;
 pub mod qp;
+pub mod timing;
 
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
@@ -84,7 +85,7 @@ impl Default for MpcSettings {
             horizon: 100,
             control_horizon: 20,
             w_velocity: 1.0,
-            w_swing_rate: 1.0,
+            w_swing_rate: 2.0,
             w_swing: 0.0,
             w_acc: 0.0,
             w_acc_rate: 1.0,
@@ -270,10 +271,12 @@ impl MpcController {
             }
             match found {
                 Some(src) => sources.push(src),
-                None => return Err(ControlError::Model(format!(
+                None => {
+                    return Err(ControlError::Model(format!(
                     "model state '{name}' is not one the controller measures on axes {suffixes:?} \
                          (expected v<axis>, swing_<axis> or swing_rate_<axis>)"
-                ))),
+                )))
+                }
             }
         }
         let mut iv = vec![usize::MAX; m];
@@ -553,13 +556,12 @@ impl SwingController for MpcController {
         } else {
             self.u_sol.copy_from(&self.u_unc);
         }
-        let m = self.m;
-        for a in 0..m {
+        for (a, out) in acc_out.iter_mut().enumerate() {
             let u = self.u_sol[a];
             if !u.is_finite() {
                 return Err(ControlError::Solver("non-finite input from the QP".into()));
             }
-            acc_out[a] = u;
+            *out = u;
             self.u_prev[a] = u;
         }
         self.kf.predict(&self.u_prev);
