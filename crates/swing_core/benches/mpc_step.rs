@@ -6,6 +6,8 @@
 //! seed 7. After criterion's runs the median / p99 per tick are printed from
 //! `control::mpc::timing::tick_timing` (the figures of DESIGN §8).
 
+#![allow(clippy::needless_range_loop)]
+
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 

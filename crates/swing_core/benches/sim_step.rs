@@ -2,6 +2,8 @@
 //! single payload + PX4 cascade + 100 Hz logging) at the 1 ms RK4 step, on one core.
 //! Budget (DESIGN §8): ≥ 1000× real time, stretch 5000×.
 
+#![allow(clippy::needless_range_loop)]
+
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::hint::black_box;
 use swing_core::plant::PayloadKind;

@@ -6,6 +6,8 @@
 //! 1 m) under a velocity P loop tracking random steps (table 4.1 ranges), with a little
 //! velocity and swing noise, sampled at 0.03 s.
 
+#![allow(clippy::needless_range_loop)]
+
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
 use swing_core::sysid::dmdc::{self, DmdcSettings};

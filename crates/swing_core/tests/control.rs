@@ -4,6 +4,8 @@
 //! computed here independently of the solvers), an independent optimum (DLQR for a long
 //! horizon MPC) and closed-loop simulations of the linear models.
 
+#![allow(clippy::needless_range_loop)]
+
 use nalgebra::{DMatrix, DVector};
 use swing_core::control::lqr::{
     c2d_zoh, care, dare, sampled_lqr, LqrController, LqrSettings, PendulumParams,

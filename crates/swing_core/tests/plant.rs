@@ -1,6 +1,8 @@
 //! Physics checks of the plant and the closed loop against closed forms and invariants
 //! (issue 2, items 5 (i)–(vii)).
 
+#![allow(clippy::needless_range_loop)]
+
 use nalgebra::{Quaternion, Vector3};
 use swing_core::control::px4::AxisSetpoint;
 use swing_core::plant::dynamics::swing_angles;

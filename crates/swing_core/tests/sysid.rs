@@ -1,5 +1,7 @@
 //! Integration tests of system identification with closed-form references.
 
+#![allow(clippy::needless_range_loop)]
+
 use nalgebra::{DMatrix, DVector};
 use swing_core::sysid::dmdc::{self, DmdcSettings};
 use swing_core::sysid::havokc::{self, HavokcSettings, HavokcSvd};

@@ -35,8 +35,7 @@ fn settings_from<T: for<'de> Deserialize<'de> + Default>(
         None => Ok(T::default()),
         Some(d) => {
             let text: String = py.import("json")?.call_method1("dumps", (d,))?.extract()?;
-            serde_json::from_str(&text)
-                .map_err(|e| to_py(ConfigError::new("settings", e.to_string())))
+            crate::sim::parse_settings(&text, "settings")
         }
     }
 }

@@ -89,8 +89,30 @@ def sysid(quick: bool) -> dict:
     }
 
 
+def mpc(quick: bool) -> dict:
+    """One MPC tick (Kalman update included) at q = 50, Np = 120, Nc = 20, one and two axes,
+    unconstrained and with an active acceleration bound, active-set and Clarabel QP."""
+    from swingrt import _core
+
+    n = 500 if quick else 3000
+    out: dict = {}
+    for axes, key in ((1, "mpc_step_us"), (2, "mpc_step_us_two_axes")):
+        model = _core.pendulum_model_json(delays=50, axes=axes)
+        res: dict = {}
+        for label, constrained, solver in (
+            ("unconstrained", False, "active_set"),
+            ("constrained", True, "active_set"),
+            ("constrained_clarabel", True, "clarabel"),
+        ):
+            settings = {"horizon": 120, "control_horizon": 20, "solver": solver}
+            t = _core.mpc_tick_timing(model, settings, n_ticks=n, constrained=constrained)
+            res[label] = {"median": t["median"], "p99": t["p99"]}
+        out[key] = res
+    return out
+
+
 #: Benchmark sections: name → function(quick) -> dict. Other domains append theirs.
-SECTIONS = {"sim_rtf": sim_rtf, "sysid": sysid}
+SECTIONS = {"sim_rtf": sim_rtf, "sysid": sysid, "mpc": mpc}
 
 
 def run(args) -> int:
