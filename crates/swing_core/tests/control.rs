@@ -892,8 +892,12 @@ fn a_horizon_shorter_than_the_swing_period_underdamps_a_two_metre_cable() {
     let p = params(0.1, 2.0);
     let m = model(0.1, 2.0, 2);
     let iae = |np: usize| {
+        // A moderate swing-rate weight, where the horizon matters most (the defaults damp
+        // harder and narrow the gap).
         let s = MpcSettings {
             horizon: np,
+            w_swing_rate: 2.0,
+            w_acc_rate: 1.0,
             ..Default::default()
         };
         let mut c = MpcController::new(&m, s).unwrap();
