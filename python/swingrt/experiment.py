@@ -257,12 +257,21 @@ def fly(
     return trace, extras
 
 
-def identify_case(train: Trace, exp: Experiment) -> tuple[Any, Any, dict[str, float]]:
-    """DMDc (with search) for the MPC, white-box estimates for the LQR."""
-    from swingrt.sysid import identify
+def identify_case(
+    train: Trace, exp: Experiment, plots: Path | None = None
+) -> tuple[Any, Any, dict[str, float]]:
+    """DMDc (with search) for the MPC, white-box estimates for the LQR; with ``plots`` the
+    search's error-vs-q plot (the Pareto elbow) is written there."""
+    from swingrt.sysid import identify, plot_pareto, search
 
-    opts = {"search": True, **exp.identify}
-    model = identify(train, method="dmdc", axes=exp.axes, **opts)
+    opts = dict(exp.identify)
+    if opts.pop("search", True) and "delays" not in opts:
+        result = search(train, method="dmdc", axes=exp.axes, **opts)
+        model = result.model
+        if plots is not None:
+            plot_pareto(result, plots)
+    else:
+        model = identify(train, method="dmdc", axes=exp.axes, **opts)
     wb = identify(train, method="whitebox", axes=exp.axes)
     est = wb.diagnostics["whitebox"]
     lqr = {
@@ -291,7 +300,8 @@ def run_experiment(
 
         train = _run(train_sc, False, "collect")
         log(f"{exp.name} [{i}/{len(all_cases)}] {case}: identification")
-        model, wb, lqr = identify_case(train, exp)
+        model, wb, lqr = identify_case(train, exp, out / f"{case}__error_vs_delays.png")
+        train.to_parquet(out / f"{case}__training.parquet")
         model.save(out / f"{case}__model.json")
         wb.save(out / f"{case}__whitebox.json")
         ev_sc = evaluation_scenario(exp, over, seed + 1, train_sc)

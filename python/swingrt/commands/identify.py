@@ -29,6 +29,12 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--test-span", type=float, default=40.0, help="held-out span [s]")
     p.add_argument("--smooth", action="store_true", help="smooth states and inputs (4.6.6)")
     p.add_argument("--plots", metavar="DIR", help="write diagnostic plots into DIR")
+    p.add_argument(
+        "--sweep",
+        choices=("length", "dt", "noise"),
+        help="also sweep training length (4.6.8), sample time (4.6.4) or sensor noise on/off "
+        "(4.6.6): table on stdout, CSV and plot into --plots DIR",
+    )
     p.add_argument("-o", "--output", default="model.json", help="model file (.json)")
     return p
 
@@ -76,5 +82,63 @@ def run(args) -> int:
         if result is not None:
             sysid.plot_pareto(result, out / "error_vs_delays.png")
             print(f"wrote {out / 'error_vs_delays.png'}")
+    if args.sweep:
+        _sweep(args, data, common)
     print(f"wrote {args.output}")
     return 0
+
+
+def _sweep(args, data, common) -> None:
+    """Run the chosen sweep, print its table, write CSV and plot (atomic)."""
+    import csv
+    import io
+
+    import numpy as np
+
+    from swingrt import sysid
+    from swingrt._io import write_text_atomic
+
+    out = Path(args.plots or ".")
+    t = np.asarray(data["t"], dtype=float)
+    avail = float(t[-1] - t[0]) - args.test_span
+    lengths = [float(x) for x in np.arange(20.0, avail + 1e-9, 20.0)]
+    if not lengths:
+        raise ConfigError(f"--sweep: the flight leaves only {avail:.0f} s after the test span")
+    kw = {k: v for k, v in common.items() if k in ("method", "axes", "offset", "test_span")}
+    if args.sweep == "length":
+        rows = sysid.sweep_training_length(data, lengths, dt=args.dt, **kw)
+        sysid.plot_training_length(rows, out / "error_vs_training_length.png")
+    elif args.sweep == "noise":
+        kw.pop("method", None)
+        rows = sysid.sweep_noise(data, lengths, method=args.method, dt=args.dt, **kw)
+        sysid.plot_training_length(rows, out / "error_vs_training_length_noise.png")
+    else:
+        rows = sysid.sweep_sample_time(data, [0.01, 0.02, 0.03, 0.05, 0.08, 0.1], **kw)
+        _plot_dt(rows, out / "error_vs_sample_time.png")
+    keys = list(rows[0]) if rows else []
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=keys, lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+    write_text_atomic(out / f"sweep_{args.sweep}.csv", buf.getvalue())
+    print(buf.getvalue().replace(",", "\t"), end="")
+    print(f"wrote {out / f'sweep_{args.sweep}.csv'}")
+
+
+def _plot_dt(rows, path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from swingrt._io import atomic_path
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.plot([r["dt"] for r in rows], [r["nmae"] for r in rows], "o-")
+    ax.set_xlabel("sample time Ts [s]")
+    ax.set_ylabel("held-out NMAE")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)

@@ -24,6 +24,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
 
 def run(args) -> int:
     """Run the subcommand."""
+    import sys
     from pathlib import Path
 
     from swingrt.experiment import Experiment, run_experiment
@@ -36,6 +37,16 @@ def run(args) -> int:
     )
     rows = run_experiment(exp, args.out, seed=args.seed, quiet=args.quiet)
     out = Path(args.out)
+    # The double descent of thesis 4.6.8 on this very training flight.
+    from swingrt import sysid
+    from swingrt.trace import Trace
+
+    train = Trace.from_parquet(out / "default-step__training.parquet")
+    if not args.quiet:
+        print("[ identification ] error vs training length", file=sys.stderr, flush=True)
+    lengths = [float(x) for x in range(20, 261, 20)]
+    sweep = sysid.sweep_training_length(train, lengths)
+    sysid.plot_training_length(sweep, out / "error_vs_training_length.png")
     print((out / "metrics.md").read_text(encoding="utf-8"))
     pid = next(r for r in rows if r["controller"] == "pid")
     mpc = next((r for r in rows if r["controller"] == "mpc"), None)
