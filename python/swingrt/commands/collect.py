@@ -18,6 +18,12 @@ def add_parser(sub) -> argparse.ArgumentParser:
     )
     add_scenario_args(p)
     p.add_argument("-o", "--output", default="train.parquet", help="trace file (.parquet|.csv)")
+    p.add_argument(
+        "--axes",
+        choices=("n", "ne"),
+        default=None,
+        help="axes of the random steps: n (default) or ne (North and East, for two-axis models)",
+    )
     p.add_argument("--connect", help="MAVLink URL: fly the mission on a vehicle instead")
     return p
 
@@ -34,11 +40,23 @@ def run(args) -> int:
             duration=args.duration or 300.0,
             seed=args.seed or 0,
             out=args.output,
+            axes=args.axes or "n",
         )
         return 0
+    from swingrt.scenario import _merge, read_toml
     from swingrt.sim import collect
 
-    trace = collect(args.scenario, duration=args.duration, seed=args.seed, progress=None)
+    config = args.scenario
+    if args.axes == "ne":
+        base = read_toml(config) if config else {}
+        config = _merge(
+            base,
+            {
+                "random_steps": {"axes": "ne"},
+                "setpoints": [{"t": 0.0, "vn": 0.0, "ve": 0.0}],
+            },
+        )
+    trace = collect(config, duration=args.duration, seed=args.seed, progress=None)
     trace.save(args.output)
     vsp = trace["vel_sp_n"]
     steps = int((abs(vsp[1:] - vsp[:-1]) > 1e-9).sum())
