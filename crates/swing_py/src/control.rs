@@ -17,7 +17,6 @@ use swing_core::control::mpc::timing::tick_timing;
 use swing_core::control::mpc::{MpcController, MpcSettings};
 use swing_core::control::{AxisState, ControlError, SwingController, TickInfo, TickKind};
 use swing_core::sysid::LinearModel;
-use swing_core::ConfigError;
 
 use crate::errors::to_py;
 
