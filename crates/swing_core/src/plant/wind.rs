@@ -106,6 +106,9 @@ impl Wind {
 
     /// Wind velocity at time `t`, NED [m/s].
     pub fn at(&self, t: f64) -> Vector3<f64> {
+        if self.p.steps.is_empty() && self.p.gusts.is_empty() {
+            return Vector3::from(self.p.velocity) + self.turb;
+        }
         let mut w = Vector3::from(self.p.velocity);
         for s in &self.p.steps {
             if t >= s.t {

@@ -56,9 +56,35 @@ pub struct TickStats {
     pub constrained: usize,
 }
 
+/// Countdown for a loop that runs every `div` physics steps (cheaper than `k % div`, which
+/// would be six integer divisions on the hot path of every step).
+#[derive(Clone, Copy, Debug)]
+struct Ticker {
+    div: u64,
+    left: u64,
+}
+
+impl Ticker {
+    fn new(div: u64) -> Self {
+        Self { div, left: 0 }
+    }
+
+    /// True on steps 0, div, 2·div, …; call exactly once per physics step.
+    #[inline]
+    fn due(&mut self) -> bool {
+        if self.left == 0 {
+            self.left = self.div - 1;
+            true
+        } else {
+            self.left -= 1;
+            false
+        }
+    }
+}
+
 struct Attached {
     ctrl: Box<dyn SwingController>,
-    div: u64,
+    ticker: Ticker,
     budget: f64,
     engage_at: f64,
     started: bool,
@@ -80,10 +106,13 @@ pub struct Simulator {
     step: u64,
     end_step: u64,
     div_rate: u64,
-    div_att: u64,
     div_pos: u64,
     div_log: u64,
-    div_noise: u64,
+    tick_rate: Ticker,
+    tick_att: Ticker,
+    tick_pos: Ticker,
+    tick_log: Ticker,
+    tick_noise: Ticker,
     schedule: Vec<SetpointEntry>,
     next_entry: usize,
     sp: Setpoint,
@@ -156,10 +185,13 @@ impl Simulator {
             step: 0,
             end_step: (sc.duration / h).round() as u64,
             div_rate: div(sc.controller.rate_loop_hz),
-            div_att: div(sc.controller.att_loop_hz),
             div_pos: div(sc.controller.pos_loop_hz),
             div_log: div(sc.log_rate),
-            div_noise: div(sc.noise.swing_rate),
+            tick_rate: Ticker::new(div(sc.controller.rate_loop_hz)),
+            tick_att: Ticker::new(div(sc.controller.att_loop_hz)),
+            tick_pos: Ticker::new(div(sc.controller.pos_loop_hz)),
+            tick_log: Ticker::new(div(sc.log_rate)),
+            tick_noise: Ticker::new(div(sc.noise.swing_rate)),
             schedule,
             next_entry: 0,
             sp: Setpoint::hold(start),
@@ -210,7 +242,12 @@ impl Simulator {
         crate::config::positive("controller.budget", budget)?;
         self.attached = Some(Attached {
             ctrl,
-            div: steps.round() as u64,
+            // Aligned with the physics step count so far, like `k % div`.
+            ticker: Ticker {
+                div: steps.round() as u64,
+                left: (steps.round() as u64 - self.step % steps.round() as u64)
+                    % steps.round() as u64,
+            },
             budget,
             engage_at,
             started: false,
@@ -359,23 +396,28 @@ impl Simulator {
     }
 
     fn physics_step(&mut self) -> Result<(), SimError> {
-        let k = self.step;
-        self.apply_schedule();
-        if self.sc.noise.swing_std > 0.0 && k % self.div_noise == 0 {
+        if self.next_entry < self.schedule.len() {
+            self.apply_schedule();
+        }
+        let noise_due = self.tick_noise.due();
+        if self.sc.noise.swing_std > 0.0 && noise_due {
             for i in 0..2 {
                 let z: f64 = StandardNormal.sample(&mut self.rng);
                 self.swing_noise[i] = self.sc.noise.swing_std * z;
             }
         }
-        if k % self.div_pos == 0 {
+        let pos_due = self.tick_pos.due();
+        if pos_due {
             self.measure_translation();
         }
-        if let Some(div) = self.attached.as_ref().map(|a| a.div) {
-            if k % div == 0 && !self.fallback {
-                self.controller_tick();
-            }
+        let ctrl_due = match self.attached.as_mut() {
+            Some(a) => a.ticker.due(),
+            None => false,
+        };
+        if ctrl_due && !self.fallback {
+            self.controller_tick();
         }
-        if k % self.div_pos == 0 {
+        if pos_due {
             let mut sp = self.sp;
             if self.ctrl_active {
                 if let Some(a) = &self.attached {
@@ -388,15 +430,15 @@ impl Simulator {
             self.fc
                 .position_velocity(&sp, &self.meas_pos, &self.meas_vel, dt, &self.acc_bias);
         }
-        if k % self.div_att == 0 {
+        if self.tick_att.due() {
             self.fc.attitude(&self.state.att);
         }
-        if k % self.div_rate == 0 {
+        if self.tick_rate.due() {
             let dt = self.div_rate as f64 * self.h;
             self.fc.rates(&self.state.rate, dt);
             self.motor_sp = self.fc.motor_thrust_setpoints(&self.sc.vehicle);
         }
-        if k % self.div_log == 0 {
+        if self.tick_log.due() {
             self.log_row();
             self.check_finite()?;
         }
