@@ -162,14 +162,20 @@ fn dot_dd<P: TwoProd>(a: &[f64], b: &[f64]) -> Dd {
             lo[l] += e + f;
         }
     }
-    let mut acc = Dd::default();
+    // Merge the lanes and the tail in the same Dot2 fashion (TwoSum on the leading parts).
+    let (mut s, mut c) = (0.0, 0.0);
     for l in 0..LANES {
-        acc = acc.add(Dd::from_parts(hi[l], lo[l]));
+        let (t, f) = two_sum(s, hi[l]);
+        s = t;
+        c += f + lo[l];
     }
     for (x, y) in ra.iter().zip(rb) {
-        acc = acc.add_prod::<P>(*x, *y);
+        let (p, e) = P::two_prod(*x, *y);
+        let (t, f) = two_sum(s, p);
+        s = t;
+        c += e + f;
     }
-    acc
+    Dd::from_parts(s, c)
 }
 
 /// Σ_k (ah_k + al_k)(bh_k + bl_k) as a double-double (products to ≈ u² relative).
@@ -180,32 +186,35 @@ fn dot_dd2<P: TwoProd>(ah: &[f64], al: &[f64], bh: &[f64], bl: &[f64]) -> Dd {
     let mut hi = [0.0; LANES];
     let mut lo = [0.0; LANES];
     let full = len - len % LANES;
-    for k0 in (0..full).step_by(LANES) {
+    let chunks = ah[..full]
+        .chunks_exact(LANES)
+        .zip(al[..full].chunks_exact(LANES))
+        .zip(
+            bh[..full]
+                .chunks_exact(LANES)
+                .zip(bl[..full].chunks_exact(LANES)),
+        );
+    for ((xh, xl), (yh, yl)) in chunks {
         for l in 0..LANES {
-            let k = k0 + l;
-            let (p, e) = P::two_prod(ah[k], bh[k]);
+            let (p, e) = P::two_prod(xh[l], yh[l]);
             let (s, f) = two_sum(hi[l], p);
             hi[l] = s;
-            lo[l] += e + f + (ah[k] * bl[k] + al[k] * bh[k]);
+            lo[l] += e + f + (xh[l] * yl[l] + xl[l] * yh[l]);
         }
     }
-    let mut acc = Dd::default();
+    let (mut s, mut c) = (0.0, 0.0);
     for l in 0..LANES {
-        acc = acc.add(Dd::from_parts(hi[l], lo[l]));
+        let (t, f) = two_sum(s, hi[l]);
+        s = t;
+        c += f + lo[l];
     }
     for k in full..len {
-        acc = acc.add(
-            Dd {
-                hi: ah[k],
-                lo: al[k],
-            }
-            .mul::<P>(Dd {
-                hi: bh[k],
-                lo: bl[k],
-            }),
-        );
+        let (p, e) = P::two_prod(ah[k], bh[k]);
+        let (t, f) = two_sum(s, p);
+        s = t;
+        c += e + f + (ah[k] * bl[k] + al[k] * bh[k]);
     }
-    acc
+    Dd::from_parts(s, c)
 }
 
 /// Gram matrix FᵀF of `feature_matrix(traj, q_max, affine, input_mean)` in double-double,
@@ -289,6 +298,27 @@ fn feature_gram_impl<P: TwoProd>(
         for b in a..lead {
             let v = dot_dd::<P>(&leads[a], &leads[b]);
             set(&mut g, a, b, v);
+        }
+        if affine && a == m {
+            // Constant × state: window sums, which slide like the lag diagonals:
+            // sum(L + 1) = sum(L) + x_i[k₀ − L] − x_i[k₁ + 1 − L].
+            for i in 0..n {
+                let mut v = dot_dd::<P>(&leads[a], window(0, i));
+                set(&mut g, a, col_of(0, i), v);
+                for l in 1..=q {
+                    v = v
+                        .add(Dd {
+                            hi: xs[i][k0 + 1 - l],
+                            lo: 0.0,
+                        })
+                        .add(Dd {
+                            hi: -xs[i][k1 + 2 - l],
+                            lo: 0.0,
+                        });
+                    set(&mut g, a, col_of(l, i), v);
+                }
+            }
+            continue;
         }
         for l in 0..=q {
             for i in 0..n {
@@ -397,7 +427,8 @@ fn cholesky_impl<P: TwoProd>(g: &[Dd], c: usize, targets: usize) -> Option<Vec<f
     let min_pivot = (0..regressors)
         .map(|j| lh[j * c + j])
         .fold(f64::INFINITY, f64::min);
-    if !(min_pivot > 1e-14 * max_pivot) {
+    // Every regressor pivot is positive and finite here, so the comparison is total.
+    if min_pivot <= 1e-14 * max_pivot {
         return None;
     }
     // R = Lᵀ, rounded to f64 (hi is the rounding of hi + lo).
@@ -408,4 +439,92 @@ fn cholesky_impl<P: TwoProd>(g: &[Dd], c: usize, targets: usize) -> Option<Vec<f
         }
     }
     Some(r)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sysid::hankel::feature_matrix;
+
+    /// A seeded, wiggly 2-state / 1-input series (values of mixed sign and size).
+    fn series(len: usize) -> (Vec<f64>, Vec<f64>) {
+        let x = (0..2 * len)
+            .map(|k| {
+                (0.37 * k as f64).sin() * 3.0 + (0.011 * k as f64).cos() + 0.1 * (k % 7) as f64
+            })
+            .collect();
+        let u = (0..len)
+            .map(|k| (0.23 * k as f64).cos() + 0.5 * (k % 5) as f64 - 1.0)
+            .collect();
+        (x, u)
+    }
+
+    /// The recurrence Gram equals FᵀF formed from the explicit feature matrix (f64 product,
+    /// error ≤ N·u·|F|ᵀ|F|), for every offset layout, and the FMA and Dekker kernels agree.
+    #[test]
+    fn hankel_gram_matches_explicit_product() {
+        let (x, u) = series(300);
+        let traj = Trajectory::new(&x, 2, &u, 1).unwrap();
+        for (q, affine, mean) in [
+            (7, true, 0.0),
+            (7, false, 0.4),
+            (1, true, 0.0),
+            (12, false, 0.0),
+        ] {
+            let g = feature_gram(&traj, q, affine, &[mean]);
+            let f = feature_matrix(&traj, q, affine, &[mean]);
+            let c = f.ncols();
+            assert_eq!(g.len(), c * c);
+            let split = feature_gram_impl::<Split>(&traj, q, affine, &[mean]);
+            for a in 0..c {
+                for b in 0..c {
+                    let (mut exact, mut abs) = (0.0, 0.0);
+                    for k in 0..f.nrows() {
+                        exact += f[(k, a)] * f[(k, b)];
+                        abs += (f[(k, a)] * f[(k, b)]).abs();
+                    }
+                    let v = g[a * c + b];
+                    assert!(
+                        (v.hi - exact).abs() <= 1e-13 * abs.max(1e-300),
+                        "entry ({a}, {b}) q {q}: {} vs {exact}",
+                        v.hi
+                    );
+                    let w = split[a * c + b];
+                    assert!(
+                        (v.hi - w.hi).abs() <= 4.0 * f64::EPSILON * abs,
+                        "kernels differ"
+                    );
+                }
+            }
+        }
+    }
+
+    /// RᵀR reproduces the Gram, R is upper triangular with a positive diagonal, and a
+    /// rank-deficient Gram is declined.
+    #[test]
+    fn cholesky_reproduces_gram_and_declines_rank_deficiency() {
+        let (x, u) = series(300);
+        let traj = Trajectory::new(&x, 2, &u, 1).unwrap();
+        let g = feature_gram(&traj, 5, true, &[0.0]);
+        let c = 1 + 1 + 2 * 5 + 2;
+        let r = cholesky_dd(&g, c, 2).unwrap();
+        for i in 0..c {
+            assert!(r[i * c + i] > 0.0);
+            for j in 0..i {
+                assert_eq!(r[i * c + j], 0.0);
+            }
+        }
+        for a in 0..c {
+            for b in 0..c {
+                let rtr: f64 = (0..c).map(|k| r[k * c + a] * r[k * c + b]).sum();
+                let scale = (g[a * c + a].hi * g[b * c + b].hi).sqrt();
+                assert!((rtr - g[a * c + b].hi).abs() <= 1e-13 * scale);
+            }
+        }
+        // A constant input duplicates the constant column: rank deficient.
+        let flat = vec![2.0; 300];
+        let traj = Trajectory::new(&x, 2, &flat, 1).unwrap();
+        let g = feature_gram(&traj, 5, true, &[0.0]);
+        assert!(cholesky_dd(&g, c, 2).is_none());
+    }
 }
