@@ -375,8 +375,7 @@ mod tests {
 
     fn singular_values(r: &Mat<f64>, k: usize) -> Vec<f64> {
         let block = Mat::<f64>::from_fn(k, k, |i, j| r[(i, j)]);
-        let s = block.singular_values().unwrap();
-        s
+        block.singular_values().unwrap()
     }
 
     /// The double-double Gram + Cholesky factor matches faer's Householder R on
