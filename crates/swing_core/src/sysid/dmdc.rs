@@ -15,6 +15,27 @@
 //! one small SVD per q serves every p — the same numbers as (4.14)–(4.15), computed in
 //! O(N r²) once instead of once per candidate. All q share the samples k ≥ q_max − 1.
 //!
+//! The triangular factor (budget: one fit with q = 50, 120 s at 0.03 s, F ≈ 3950 × 104, in
+//! < 5 ms on one core). Only R is needed, never Q, and any R with RᵀR = FᵀF serves (row
+//! signs drop out of U, Σ and X'V). On smooth, noise-free flight data cond(F) ≈ 1e8–1e11,
+//! so the f64 Gram FᵀF (cond squared, beyond 1/u) cannot be factored, and the former route
+//! — f64 Gram + Cholesky, falling back to a Householder QR of F — paid for both (≈ 15 ms).
+//! Now (`gram` module) FᵀF is formed in double-double arithmetic (error-free TwoProd/TwoSum,
+//! ≈ 106-bit significand) and factored by a double-double Cholesky; squaring the condition
+//! number is harmless at that precision, and R rounded to f64 is at least as accurate as the
+//! Householder R (backward error ≈ u‖F‖). The Gram is cheap because F is block-Hankel: along
+//! a lag diagonal an entry follows from its predecessor by adding one product and removing
+//! another (the sample window slides by one), so only the entries with the target, input and
+//! constant columns are full dot products — O(N·C·(n+m+1) + C³) instead of O(N·C²), and F
+//! itself is not built. The Householder QR of F remains the fallback when the regressor
+//! columns are numerically rank deficient (the double-double Cholesky meets a non-positive
+//! pivot or a pivot ratio below 1e-14). Alternatives considered: shifted CholeskyQR3 (three
+//! Gram products and triangular solves over F, ≈ 3× the flops of one Householder QR) and a
+//! tuned tall-skinny QR both stay O(N·C²); the structured Gram is the only route well under
+//! budget. Checked against faer's Householder R on cond ≈ 5e10 data (singular values of the
+//! regressor block to ≈ 3e-9 relative, G at p = 40 to ≈ 3e-13; at full rank G differs by
+//! ≈ 1e-6, within Householder's own u·σ₁/σ_p sensitivity).
+//!
 //! Offsets (4.6.6): `mean` subtracts the training input mean from u (stored as
 //! `input_mean`); `affine` appends a constant-1 feature whose coefficient is `c`; `none`
 //! does neither. The returned [`LinearModel`] is in the delay form of DESIGN §7: the top n
