@@ -115,6 +115,22 @@ fn bench(c: &mut Criterion) {
         b.iter(|| dmdc::fit(black_box(&smooth), &affine).unwrap())
     });
 
+    // Optional: recorded data (CSV rows `x0,x1,u`, e.g. the simulator flight that
+    // `swingrt bench` uses), named by SWINGRT_DMDC_DATA.
+    if let Ok(path) = std::env::var("SWINGRT_DMDC_DATA") {
+        let text = std::fs::read_to_string(&path).expect("SWINGRT_DMDC_DATA is readable");
+        let (mut xf, mut uf) = (Vec::new(), Vec::new());
+        for line in text.lines().filter(|l| !l.trim().is_empty()) {
+            let v: Vec<f64> = line.split(',').map(|t| t.trim().parse().unwrap()).collect();
+            xf.extend([v[0], v[1]]);
+            uf.push(v[2]);
+        }
+        let file = Trajectory::new(&xf, 2, &uf, 1).unwrap();
+        c.bench_function("dmdc_fit_q50_file_affine", |b| {
+            b.iter(|| dmdc::fit(black_box(&file), &affine).unwrap())
+        });
+    }
+
     let (x, u) = flight(120.0, 1);
     let traj = Trajectory::new(&x, 2, &u, 1).unwrap();
     let settings = DmdcSettings {

@@ -406,6 +406,28 @@ mod tests {
     fn gram_factor_matches_householder_on_ill_conditioned_data() {
         let (x, u) = smooth_flight(4000);
         let traj = Trajectory::new(&x, 2, &u, 1).unwrap();
+        compare_with_householder(&traj, 1e7);
+    }
+
+    /// The same check on recorded data: a CSV of rows `x0,x1,u` named by the environment
+    /// variable `SWINGRT_DMDC_DATA` (e.g. the `swingrt bench` training flight).
+    #[test]
+    #[ignore = "needs SWINGRT_DMDC_DATA"]
+    fn gram_factor_matches_householder_on_file_data() {
+        let path = std::env::var("SWINGRT_DMDC_DATA").expect("set SWINGRT_DMDC_DATA");
+        let text = std::fs::read_to_string(path).unwrap();
+        let (mut x, mut u) = (Vec::new(), Vec::new());
+        for line in text.lines().filter(|l| !l.trim().is_empty()) {
+            let v: Vec<f64> = line.split(',').map(|t| t.trim().parse().unwrap()).collect();
+            x.extend([v[0], v[1]]);
+            u.push(v[2]);
+        }
+        let traj = Trajectory::new(&x, 2, &u, 1).unwrap();
+        compare_with_householder(&traj, 1.0);
+    }
+
+    fn compare_with_householder(traj: &Trajectory<'_>, min_cond: f64) {
+        let traj = traj.clone();
         for offset in [Offset::Affine, Offset::Mean] {
             let basis = DmdcBasis::new(&traj, 50, offset).unwrap();
             let reference = DmdcBasis {
@@ -422,7 +444,7 @@ mod tests {
             let cond = sb[0] / sb[c - 1];
             eprintln!("{offset:?}: cond(F regressors) = {cond:.3e}");
             assert!(
-                cond > 1e7,
+                cond > min_cond,
                 "test data should be ill conditioned, cond {cond:e}"
             );
             let mut worst = 0.0_f64;
