@@ -5,6 +5,7 @@
 
 pub mod dmdc;
 pub mod error;
+mod gram;
 pub mod hankel;
 pub mod havokc;
 pub mod metrics;
