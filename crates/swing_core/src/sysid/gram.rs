@@ -52,7 +52,8 @@ trait TwoProd {
     fn two_prod(a: f64, b: f64) -> (f64, f64);
 }
 
-/// Hardware fused multiply-add (only used inside `target_feature(enable = "fma")` code).
+/// Hardware fused multiply-add (only used inside `target_feature(enable = "fma")` code on
+/// x86-64, and on AArch64 where FMA is part of the base ISA).
 struct Fma;
 impl TwoProd for Fma {
     #[inline(always)]
@@ -233,6 +234,12 @@ pub(crate) fn feature_gram(
             return unsafe { feature_gram_fma(traj, q_max, affine, input_mean) };
         }
     }
+    // AArch64 (the Jetson) always has a fused multiply-add.
+    #[cfg(target_arch = "aarch64")]
+    {
+        return feature_gram_impl::<Fma>(traj, q_max, affine, input_mean);
+    }
+    #[allow(unreachable_code)]
     feature_gram_impl::<Split>(traj, q_max, affine, input_mean)
 }
 
@@ -365,6 +372,11 @@ pub(crate) fn cholesky_dd(g: &[Dd], c: usize, targets: usize) -> Option<Vec<f64>
             return unsafe { cholesky_fma(g, c, targets) };
         }
     }
+    #[cfg(target_arch = "aarch64")]
+    {
+        return cholesky_impl::<Fma>(g, c, targets);
+    }
+    #[allow(unreachable_code)]
     cholesky_impl::<Split>(g, c, targets)
 }
 
