@@ -38,6 +38,8 @@
 //! converges to the CARE gain as the period → 0 (a test checks this).
 
 use nalgebra::{DMatrix, DVector};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::{AxisState, ControlError, SwingController, TickInfo, TickKind};
@@ -468,7 +470,7 @@ impl PendulumParams {
         let nz = n * delays;
         let samples = (nz + 1) * 6 + 400;
         // Seeded random steps of table 4.1's kind (levels ±2 m/s², holds 0.3–1.5 s).
-        let mut rng = SplitMix64(seed);
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let mut x = DVector::<f64>::zeros(3);
         let mut xs = Vec::with_capacity(samples + 1);
         let mut us = Vec::with_capacity(samples);
@@ -476,8 +478,8 @@ impl PendulumParams {
         let mut hold = 0usize;
         for _ in 0..samples {
             if hold == 0 {
-                level = 4.0 * rng.uniform() - 2.0;
-                hold = (0.3 / dt + rng.uniform() * 1.2 / dt) as usize + 1;
+                level = rng.random_range(-2.0..2.0);
+                hold = (rng.random_range(0.3..1.5) / dt) as usize + 1;
                 // pull velocity back toward zero so the data stay bounded
                 level -= 0.5 * x[0];
             }
@@ -571,23 +573,6 @@ pub fn pendulum_delay_model(
         _ => Err(ControlError::Model(format!(
             "axes must be 1 or 2 (got {axes})"
         ))),
-    }
-}
-
-/// Tiny seeded generator (SplitMix64) for the reproducible training input of
-/// [`PendulumParams::delay_model`].
-struct SplitMix64(u64);
-
-impl SplitMix64 {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }
 }
 
