@@ -678,32 +678,6 @@ impl LqrController {
     }
 }
 
-fn check_inputs(
-    axes: usize,
-    state: &[AxisState],
-    other: &[f64],
-    what: &str,
-) -> Result<(), ControlError> {
-    if state.len() != axes || other.len() != axes {
-        return Err(ControlError::Input(format!(
-            "expected {axes} axis state(s) and {axes} {what} value(s), got {} and {}",
-            state.len(),
-            other.len()
-        )));
-    }
-    for (i, s) in state.iter().enumerate() {
-        if !(s.v.is_finite() && s.swing.is_finite() && s.swing_rate.is_finite()) {
-            return Err(ControlError::Input(format!(
-                "axis {i} state is not finite: {s:?}"
-            )));
-        }
-    }
-    if let Some(i) = other.iter().position(|x| !x.is_finite()) {
-        return Err(ControlError::Input(format!("{what}[{i}] is not finite")));
-    }
-    Ok(())
-}
-
 impl SwingController for LqrController {
     fn axes(&self) -> usize {
         self.axes
@@ -735,14 +709,7 @@ impl SwingController for LqrController {
         vel_ref: &[f64],
         acc_out: &mut [f64],
     ) -> Result<TickInfo, ControlError> {
-        check_inputs(self.axes, state, vel_ref, "velocity reference")?;
-        if acc_out.len() != self.axes {
-            return Err(ControlError::Input(format!(
-                "output slice has {} entries for {} axes",
-                acc_out.len(),
-                self.axes
-            )));
-        }
+        super::check_tick_inputs(self.axes, state, vel_ref, acc_out)?;
         let k = self.k;
         for i in 0..self.axes {
             let s = state[i];

@@ -78,6 +78,34 @@ impl Categorized for ControlError {
     }
 }
 
+/// Check one tick's slices: one state, reference and output per axis, all finite.
+pub(crate) fn check_tick_inputs(
+    axes: usize,
+    state: &[AxisState],
+    vel_ref: &[f64],
+    out: &[f64],
+) -> Result<(), ControlError> {
+    if state.len() != axes || vel_ref.len() != axes || out.len() != axes {
+        return Err(ControlError::Input(format!(
+            "expected {axes} axis state(s), reference(s) and output(s), got {}, {} and {}",
+            state.len(),
+            vel_ref.len(),
+            out.len()
+        )));
+    }
+    for (i, s) in state.iter().enumerate() {
+        if !(s.v.is_finite() && s.swing.is_finite() && s.swing_rate.is_finite()) {
+            return Err(ControlError::Input(format!(
+                "axis {i} state is not finite: {s:?}"
+            )));
+        }
+    }
+    if let Some(i) = vel_ref.iter().position(|x| !x.is_finite()) {
+        return Err(ControlError::Input(format!("vel_ref[{i}] is not finite")));
+    }
+    Ok(())
+}
+
 /// A swing-damping controller in place of PX4's velocity PID on the controlled axes.
 ///
 /// Slices have one entry per controlled axis, in the order North, East.

@@ -443,29 +443,6 @@ impl MpcController {
             };
         }
     }
-
-    fn check(&self, state: &[AxisState], vel_ref: &[f64], out: &[f64]) -> Result<(), ControlError> {
-        let m = self.m;
-        if state.len() != m || vel_ref.len() != m || out.len() != m {
-            return Err(ControlError::Input(format!(
-                "expected {m} axis state(s), reference(s) and output(s), got {}, {} and {}",
-                state.len(),
-                vel_ref.len(),
-                out.len()
-            )));
-        }
-        for (i, s) in state.iter().enumerate() {
-            if !(s.v.is_finite() && s.swing.is_finite() && s.swing_rate.is_finite()) {
-                return Err(ControlError::Input(format!(
-                    "axis {i} state is not finite: {s:?}"
-                )));
-            }
-        }
-        if let Some(i) = vel_ref.iter().position(|x| !x.is_finite()) {
-            return Err(ControlError::Input(format!("vel_ref[{i}] is not finite")));
-        }
-        Ok(())
-    }
 }
 
 impl SwingController for MpcController {
@@ -517,7 +494,7 @@ impl SwingController for MpcController {
         vel_ref: &[f64],
         acc_out: &mut [f64],
     ) -> Result<TickInfo, ControlError> {
-        self.check(state, vel_ref, acc_out)?;
+        crate::control::check_tick_inputs(self.m, state, vel_ref, acc_out)?;
         if !self.initialized {
             let zeros = [0.0; 2];
             self.reset(state, &zeros[..self.m]);
