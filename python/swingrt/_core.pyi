@@ -167,6 +167,15 @@ class Lqr:
     def reset(self, state: npt.NDArray[np.float64], acc: Any = None) -> None: ...
     def gain(self) -> npt.NDArray[np.float64]: ...
 
+def mpc_step_check(
+    model_json: str,
+    plant_json: str,
+    settings: dict[str, Any] | None = None,
+    step: float = 2.0,
+    t_step: float = 2.0,
+    duration: float = 20.0,
+    input_lag: float = 0.0,
+) -> dict[str, float]: ...
 def care(
     A: npt.NDArray[np.float64],
     B: npt.NDArray[np.float64],

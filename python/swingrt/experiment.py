@@ -257,16 +257,25 @@ def fly(
     return trace, extras
 
 
+#: Identification options a refit needs to reproduce a search's candidate.
+_FIT_OPTIONS = ("offset", "dt", "test_span", "horizon", "starts", "smooth", "smooth_window")
+
+
 def identify_case(
     train: Trace, exp: Experiment, plots: Path | None = None
 ) -> tuple[Any, Any, dict[str, float]]:
     """DMDc (with search) for the MPC, white-box estimates for the LQR; with ``plots`` the
     search's error-vs-q plot (the Pareto elbow) is written there."""
-    from swingrt.sysid import identify, plot_pareto, search
+    from swingrt.sysid import identify, plot_pareto, search, select_for_control
 
     opts = dict(exp.identify)
     if opts.pop("search", True) and "delays" not in opts:
         result = search(train, method="dmdc", axes=exp.axes, **opts)
+        if "mpc" in exp.controllers:
+            fit = {k: v for k, v in opts.items() if k in _FIT_OPTIONS}
+            result = select_for_control(
+                train, result, axes=exp.axes, mpc_settings=exp.mpc or None, **fit
+            )
         model = result.model
         if plots is not None:
             plot_pareto(result, plots)

@@ -44,6 +44,7 @@ __all__ = [
     "plot_training_length",
     "resample",
     "search",
+    "select_for_control",
     "sweep_noise",
     "sweep_sample_time",
     "sweep_training_length",
@@ -459,6 +460,104 @@ def identify(
         except DataError:
             pass  # test span too short for the horizon: no held-out score
     return model
+
+
+#: Closed-loop check bounds of :func:`select_for_control`, as fractions of the step.
+CONTROL_CHECK_BOUNDS = {"overshoot": 0.35, "final_error": 0.03, "hold_drift": 0.1}
+
+
+def select_for_control(
+    data: Any,
+    result: SearchResult,
+    *,
+    method: str = "dmdc",
+    axes: str = "n",
+    mpc_settings: dict[str, Any] | None = None,
+    candidates: int = 20,
+    input_lags: Sequence[float] = (0.0, 0.1),
+    step: float = 2.0,
+    bounds: Mapping[str, float] | None = None,
+    **fit: Any,
+) -> SearchResult:
+    """Pick from a search the model to fly an MPC on (control-relevant selection).
+
+    Rollout NMAE alone is a poor guide here: models within a few percent of the best can
+    carry spurious slow modes that the MPC's feedback excites (hover drift, a creep that
+    leaves the velocity 0.2-0.8 m/s short after 30 s, even divergence). The ``candidates``
+    stable (q, p) of lowest NMAE are refitted and, best NMAE first, the MPC designed on each
+    (``mpc_settings``) flies the white-box model of the same flight in closed loop, with
+    each of ``input_lags`` [s] between controller and plant (:func:`swingrt._core.mpc_step_check`):
+    hover, a ``step`` m/s step, hold. The first whose every run stays within ``bounds``
+    (fractions of the step: ``overshoot``, ``final_error`` at 20 s, ``hold_drift``) is
+    selected; with none passing, the one that misses its bounds least, and it says so.
+    ``fit`` are the identification options the search used (``offset``, ``dt``,
+    ``test_span``...). The outcome is in ``model.diagnostics['control_check']``.
+    """
+    limits = dict(CONTROL_CHECK_BOUNDS)
+    if bounds:
+        unknown = set(bounds) - set(limits)
+        if unknown:
+            raise ConfigError(f"unknown control-check bound(s) {sorted(unknown)}")
+        limits.update(bounds)
+    if candidates < 1:
+        raise ConfigError(f"candidates must be >= 1, not {candidates}")
+    fit = {k: v for k, v in fit.items() if k not in ("delays", "rank", "search")}
+    plant = identify(data, method="whitebox", axes=axes, dt=fit.get("dt", 0.03))
+    rows = sorted(
+        (r for r in result.table if r["stable"] is True),
+        key=lambda r: r["nmae"],
+    )[:candidates]
+    checked: list[dict[str, Any]] = []
+    chosen = None
+    for row in rows:
+        q, p = row["delays"], row["rank"]
+        if (q, p) == (result.model.delays, result.model.rank):
+            model = result.model
+        else:
+            model = identify(data, method=method, axes=axes, delays=q, rank=p, **fit)
+        runs = [
+            _core.mpc_step_check(
+                model.to_json(),
+                plant.to_json(),
+                mpc_settings or None,
+                step=step,
+                input_lag=lag,
+            )
+            for lag in input_lags
+        ]
+        worst = {k: max(r[k] for r in runs) for k in limits}
+        ok = all(worst[k] <= limits[k] for k in limits)
+        checked.append({"delays": q, "rank": p, "nmae": row["nmae"], "passed": ok, **worst})
+        if ok:
+            chosen = model
+            break
+    passed = chosen is not None
+    if chosen is None:
+        # None passes: the one that misses its bounds least (ratio to the bound), refitted.
+        least = min(checked, key=lambda c: max(c[k] / limits[k] for k in limits))
+        if (least["delays"], least["rank"]) == (result.model.delays, result.model.rank):
+            chosen = result.model
+        else:
+            chosen = identify(
+                data, method=method, axes=axes, delays=least["delays"], rank=least["rank"], **fit
+            )
+    picked = _with_diagnostics(
+        chosen,
+        selected=next(
+            (r for r in result.table if (r["delays"], r["rank"]) == (chosen.delays, chosen.rank)),
+            result.model.diagnostics.get("selected", {}),
+        ),
+        control_check={
+            "plant": "whitebox",
+            "input_lags": list(input_lags),
+            "step": step,
+            "bounds": limits,
+            "passed": passed,
+            "checked": checked,
+        },
+    )
+    picked.search_table = result.table
+    return SearchResult(model=picked, table=result.table)
 
 
 def _with_diagnostics(model: LinearModel, **items: Any) -> LinearModel:

@@ -907,3 +907,118 @@ fn a_horizon_shorter_than_the_swing_period_underdamps_a_two_metre_cable() {
     let (long, short) = (iae(100), iae(60));
     assert!(long < 0.75 * short, "IAE Np=100 {long} vs Np=60 {short}");
 }
+
+// ---------------------------------------------------------------- closed-loop step check
+
+#[test]
+fn step_check_on_its_own_model_matches_an_independent_loop() {
+    use swing_core::control::check::{mpc_step_check, StepCheckSettings};
+    let m = model(0.2, 1.0, 8);
+    let check = StepCheckSettings {
+        step: 1.5,
+        t_step: 1.0,
+        duration: 20.0,
+        input_lag: 0.0,
+    };
+    let r = mpc_step_check(&m, MpcSettings::default(), &m, &check).unwrap();
+    // Reference: the same controller and plant stepped by this file's own loop.
+    let mut ctrl = MpcController::new(&m, MpcSettings::default()).unwrap();
+    let mut plant = LinearPlant::new(&m);
+    let ticks = (check.duration / TS).round() as usize;
+    let at = (check.t_step / TS).round() as usize;
+    let refs = move |k: usize| vec![if k >= at { 1.5 } else { 0.0 }];
+    // `run_linear` records the state after each tick; the check reads it before, so its
+    // last reading is the reference's second-to-last plus one more tick: compare at the end.
+    let (_, vs, _) = run_linear(&mut ctrl, &mut plant, &refs, &[0.0], ticks);
+    let v_end = vs[ticks - 1][0];
+    assert!(
+        ((v_end - 1.5).abs() / 1.5 - r.final_error).abs() < 1e-9,
+        "check {r:?} vs loop v_end {v_end}"
+    );
+    let peak = vs[..ticks - 1]
+        .iter()
+        .map(|v| v[0])
+        .fold(f64::MIN, f64::max);
+    assert!(
+        ((peak - 1.5) / 1.5 - r.overshoot).abs() < 1e-9,
+        "{peak} {r:?}"
+    );
+    assert!(r.final_error < 1e-3 && r.hold_drift < 1e-9, "{r:?}");
+    assert!(r.passes(0.35, 0.03, 0.1));
+}
+
+#[test]
+fn step_check_flags_a_plant_the_mpc_cannot_fly() {
+    use swing_core::control::check::{mpc_step_check, StepCheckSettings};
+    let m = model(0.2, 1.0, 8);
+    // The same plant with the input acting backwards: any model-based loop runs away.
+    let mut wrong = m.clone();
+    wrong.b = -wrong.b;
+    let r = mpc_step_check(
+        &m,
+        MpcSettings::default(),
+        &wrong,
+        &StepCheckSettings::default(),
+    )
+    .unwrap();
+    assert!(!r.passes(0.35, 0.03, 0.1), "{r:?}");
+    assert!(r.final_error > 1.0, "{r:?}");
+    // A lag of the attitude loop's order leaves a good model passing.
+    let lagged = StepCheckSettings {
+        input_lag: 0.1,
+        ..Default::default()
+    };
+    let r = mpc_step_check(&m, MpcSettings::default(), &m, &lagged).unwrap();
+    assert!(r.passes(0.35, 0.03, 0.1), "{r:?}");
+}
+
+#[test]
+fn step_check_rejects_mismatched_plants_and_bad_settings() {
+    use swing_core::control::check::{mpc_step_check, StepCheckSettings};
+    let m = model(0.2, 1.0, 8);
+    let mut other_dt = m.clone();
+    other_dt.dt = 0.02;
+    let e = mpc_step_check(
+        &m,
+        MpcSettings::default(),
+        &other_dt,
+        &StepCheckSettings::default(),
+    );
+    assert!(
+        matches!(e, Err(ControlError::Model(ref s)) if s.contains("dt")),
+        "{e:?}"
+    );
+    let mut other_input = m.clone();
+    other_input.inputs = vec!["acc_sp_e".into()];
+    let e = mpc_step_check(
+        &m,
+        MpcSettings::default(),
+        &other_input,
+        &StepCheckSettings::default(),
+    );
+    assert!(
+        matches!(e, Err(ControlError::Model(ref s)) if s.contains("inputs")),
+        "{e:?}"
+    );
+    for bad in [
+        StepCheckSettings {
+            step: 0.0,
+            ..Default::default()
+        },
+        StepCheckSettings {
+            step: f64::NAN,
+            ..Default::default()
+        },
+        StepCheckSettings {
+            t_step: 30.0,
+            ..Default::default()
+        },
+        StepCheckSettings {
+            input_lag: -1.0,
+            ..Default::default()
+        },
+    ] {
+        let e = mpc_step_check(&m, MpcSettings::default(), &m, &bad);
+        assert!(matches!(e, Err(ControlError::Config(_))), "{bad:?}: {e:?}");
+    }
+}

@@ -12,6 +12,7 @@ use numpy::{
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use serde::Deserialize;
+use swing_core::control::check::{self, StepCheckSettings};
 use swing_core::control::lqr::{self, LqrController, LqrSettings, PendulumParams};
 use swing_core::control::mpc::timing::tick_timing;
 use swing_core::control::mpc::{MpcController, MpcSettings};
@@ -389,6 +390,41 @@ fn pendulum_model_json(
     m.to_json().map_err(to_py)
 }
 
+/// Closed-loop step check of the MPC on `model_json` flying the linear plant `plant_json`
+/// (see `swing_core::control::check`): dict of `overshoot`, `final_error`, `hold_drift`, as
+/// fractions of the step.
+#[pyfunction]
+#[pyo3(signature = (model_json, plant_json, settings=None, step=2.0, t_step=2.0, duration=20.0, input_lag=0.0))]
+#[allow(clippy::too_many_arguments)]
+fn mpc_step_check<'py>(
+    py: Python<'py>,
+    model_json: &str,
+    plant_json: &str,
+    settings: Option<&Bound<'py, PyDict>>,
+    step: f64,
+    t_step: f64,
+    duration: f64,
+    input_lag: f64,
+) -> PyResult<Bound<'py, PyDict>> {
+    let model = parse_model(model_json)?;
+    let plant = parse_model(plant_json)?;
+    let settings: MpcSettings = settings_from(py, settings)?;
+    let check = StepCheckSettings {
+        step,
+        t_step,
+        duration,
+        input_lag,
+    };
+    let r = py
+        .detach(|| check::mpc_step_check(&model, settings, &plant, &check))
+        .map_err(to_py)?;
+    let d = PyDict::new(py);
+    d.set_item("overshoot", r.overshoot)?;
+    d.set_item("final_error", r.final_error)?;
+    d.set_item("hold_drift", r.hold_drift)?;
+    Ok(d)
+}
+
 /// Register this domain's functions and classes on the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyMpc>()?;
@@ -397,5 +433,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(dare, m)?)?;
     m.add_function(wrap_pyfunction!(mpc_tick_timing, m)?)?;
     m.add_function(wrap_pyfunction!(pendulum_model_json, m)?)?;
+    m.add_function(wrap_pyfunction!(mpc_step_check, m)?)?;
     Ok(())
 }

@@ -21,6 +21,14 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("data", metavar="DATA", help="flight log (.parquet, .csv, .ulg)")
     p.add_argument("--method", choices=("dmdc", "havokc", "whitebox"), default="dmdc")
     p.add_argument("--search", action="store_true", help="coarse→fine search over q and p")
+    p.add_argument(
+        "--select",
+        choices=("control", "nmae"),
+        default="control",
+        help="with --search: 'control' (default) takes the lowest-NMAE candidate whose MPC "
+        "passes a closed-loop step check on the white-box model of the same flight; 'nmae' "
+        "the lowest NMAE alone",
+    )
     p.add_argument("--axes", choices=("n", "ne"), default="n", help="North, or North + East")
     p.add_argument("--delays", type=int, metavar="Q", help="delay count q (default 20)")
     p.add_argument("--rank", type=int, metavar="P", help="SVD truncation rank p (default full)")
@@ -66,6 +74,14 @@ def run(args) -> int:
     result = None
     if args.search:
         result = sysid.search(data, **common)
+        if args.select == "control":
+            fit = {k: v for k, v in common.items() if k not in ("method", "axes")}
+            result = sysid.select_for_control(
+                data, result, method=args.method, axes=args.axes, **fit
+            )
+            cc = result.model.diagnostics["control_check"]
+            verdict = "passed" if cc["passed"] else "no candidate passed; least violating kept"
+            print(f"closed-loop check: {verdict} ({len(cc['checked'])} candidate(s) flown)")
         model = result.model
     else:
         model = sysid.identify(data, delays=args.delays, rank=args.rank, **common)

@@ -10,9 +10,11 @@ use thiserror::Error;
 
 use crate::error::{Categorized, Category};
 
+pub mod check;
 pub mod lqr;
 pub mod mpc;
 
+pub use check::{mpc_step_check, StepCheck, StepCheckSettings};
 pub use lqr::{care, dare, LqrController, LqrSettings, PendulumParams, RiccatiSolution};
 pub use mpc::{MpcController, MpcSettings, QpSolverKind};
 
