@@ -28,7 +28,7 @@ import numpy as np
 
 from swingrt._io import atomic_path, write_text_atomic
 from swingrt.errors import ConfigError
-from swingrt.metrics import METRICS, step_metrics
+from swingrt.metrics import METRICS, step_metrics, swing_iae_floor
 from swingrt.scenario import _merge, builtin, read_toml, resolve
 from swingrt.trace import Trace
 
@@ -337,10 +337,30 @@ def run_experiment(
                 notes.append(f"{case} {ctrl}: fell back to PX4 PID ({extras['fallback']})")
             if "prediction" in extras:
                 prediction = extras["prediction"]
+        floors = {
+            c: swing_iae_floor(tr, t0=exp.step["t"], axis="ne" if exp.axes == "ne" else "n")
+            for c, tr in traces.items()
+        }
+        iae = {r["controller"]: r["swing_iae_deg_s"] for r in rows if r["scenario"] == case}
+        notes.append(
+            f"{case}: swing IAE floor |∫(swing − final) dt| (the payload's Δv/g and drag, "
+            "any controller) "
+            + ", ".join(f"{c} {floors[c]:.2f}" for c in traces)
+            + " deg·s; excess above it "
+            + ", ".join(f"{c} {iae[c] - floors[c]:.2f}" for c in traces)
+            + " deg·s"
+        )
+        cc = model.diagnostics.get("control_check")
+        if cc is not None and not cc.get("passed", True):
+            notes.append(
+                f"{case}: no searched model passed the closed-loop check; the least "
+                "violating one was flown"
+            )
         notes.append(
             f"{case}: DMDc q = {model.delays}, p = {model.rank}, "
-            f"test NMAE {model.diagnostics.get('test_nmae', float('nan')):.4f}; white-box "
-            f"m_p = {lqr['m_p']:.3f} kg, l = {lqr['l']:.3f} m"
+            f"test NMAE {model.diagnostics.get('test_nmae', float('nan')):.4f}"
+            + (f" ({len(cc['checked'])} candidate(s) flown in the closed-loop check)" if cc else "")
+            + f"; white-box m_p = {lqr['m_p']:.3f} kg, l = {lqr['l']:.3f} m"
         )
         plot_case(out / f"{case}.png", case, traces, exp.axes)
         if prediction is not None and "mpc" in traces:

@@ -12,6 +12,12 @@ the step direction), over the window after the step:
 - ``effort``: ∫ |a_sp|² dt of the horizontal acceleration setpoint [m²/s³].
 
 "final" is the mean over the last 2 s of the window.
+
+:func:`swing_iae_floor` gives the part of the swing IAE that no controller can remove:
+horizontally the cable is all that accelerates the payload, so g·∫tan(swing) dt equals the
+payload's velocity change plus its drag impulse. A step of Δv therefore needs
+|∫(swing − final) dt| ≈ Δv/g (11.7 deg·s for 2 m/s, a little less with payload drag), and
+∫|swing − final| dt can only exceed it; what a controller decides is the excess.
 """
 
 from __future__ import annotations
@@ -107,6 +113,32 @@ def step_metrics(
         "ss_error": float(abs(va - np.mean(vw[tail]))),
         "effort": float(np.sum(a2) * dt),
     }
+
+
+def swing_iae_floor(trace, *, t0: float, axis: str = "n", t_end: float | None = None) -> float:
+    """|∫(swing − final) dt| [deg·s] after the step at ``t0``, the swing along the step
+    direction for ``ne``: the lower bound of ``swing_iae_deg_s`` (module docs)."""
+    t = _col(trace, "t")
+    if axis not in ("n", "e", "ne"):
+        raise DataError(f"axis must be 'n', 'e' or 'ne' (got {axis!r})")
+    cols = getattr(trace, "columns", trace)
+    swing_name = "swing_true_{}" if "swing_true_n" in cols else "swing_{}"
+    sn, se = _col(trace, swing_name.format("n")), _col(trace, swing_name.format("e"))
+    if t_end is None:
+        t_end = float(t[-1])
+    win = (t >= t0) & (t <= t_end + 1e-9)
+    if win.sum() < 10:
+        raise DataError(f"too few samples after the step at t = {t0} s")
+    if axis == "ne":
+        vsp = np.array([np.nanmedian(_col(trace, f"vel_sp_{a}")[win]) for a in "ne"])
+        d = vsp / (float(np.hypot(*vsp)) or 1.0)
+        swing = sn * d[0] + se * d[1]
+    else:
+        swing = sn if axis == "n" else se
+    tw, sw = t[win], swing[win]
+    dt = float(np.median(np.diff(tw)))
+    final = float(np.mean(sw[tw >= tw[-1] - 2.0]))
+    return float(np.degrees(abs(np.sum(sw - final)) * dt))
 
 
 def step_time(trace, axis: str = "n") -> float | None:
