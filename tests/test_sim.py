@@ -155,3 +155,25 @@ def test_summary_metrics_match_hand_computation():
     assert m["swing_iae_deg_s"] == pytest.approx(5.0 * (1 - math.exp(-8.0)), rel=0.02)
     assert m["overshoot_pct"] == 0.0
     assert m["v_settle_s"] == pytest.approx(math.log(20.0), abs=0.011)
+
+
+def test_swing_iae_floor_is_the_payload_momentum_change():
+    """Only the cable accelerates the payload horizontally: ∫(swing − final) dt ≈ Δv_p/g
+    (a little less with payload drag), so no controller's swing IAE can go below it."""
+    from swingrt.metrics import swing_iae_floor
+
+    trace = swingrt.simulate({}, seed=0)
+    t = trace.t
+    vp = np.gradient(trace["payload_pn"], t)
+    dv = float(np.mean(vp[t > t[-1] - 2.0]) - np.mean(vp[(t > 1.0) & (t < 2.0)]))
+    floor = swing_iae_floor(trace, t0=2.0)
+    bound = math.degrees(dv / 9.81)
+    assert 0.9 * bound < floor < 1.03 * bound, (floor, bound, dv)
+    assert swingrt.step_metrics(trace, t0=2.0)["swing_iae_deg_s"] >= floor
+    # Hand-computed on a synthetic swing: a 5° bump of 1 s ∫ = 5·(2/π) deg·s, sign dropped.
+    tt = np.arange(0, 12.0001, 0.01)
+    bump = np.where((tt >= 2.0) & (tt < 3.0), -np.radians(5.0) * np.sin(np.pi * (tt - 2.0)), 0.0)
+    z = np.zeros_like(tt)
+    cols = dict(t=tt, vn=z, ve=z, swing_n=bump, swing_e=z, acc_sp_n=z, acc_sp_e=z)
+    cols.update(vel_sp_n=np.where(tt >= 2.0, 1.0, 0.0), vel_sp_e=z)
+    assert swing_iae_floor(swingrt.Trace(cols), t0=2.0) == pytest.approx(10 / math.pi, rel=0.01)

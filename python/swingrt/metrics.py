@@ -57,6 +57,21 @@ def _settle(t: np.ndarray, err: np.ndarray, band: float, t0: float) -> float:
     return float(t[last + 1] - t0)
 
 
+def _step_window(trace, t0: float, axis: str, t_end: float | None):
+    """Time, the step window mask and the swing columns (true swing when logged)."""
+    t = _col(trace, "t")
+    if axis not in ("n", "e", "ne"):
+        raise DataError(f"axis must be 'n', 'e' or 'ne' (got {axis!r})")
+    cols = getattr(trace, "columns", trace)
+    swing_name = "swing_true_{}" if "swing_true_n" in cols else "swing_{}"
+    sn, se = _col(trace, swing_name.format("n")), _col(trace, swing_name.format("e"))
+    end = float(t[-1]) if t_end is None else t_end
+    win = (t >= t0) & (t <= end + 1e-9)
+    if win.sum() < 10:
+        raise DataError(f"too few samples after the step at t = {t0} s")
+    return t, win, sn, se
+
+
 def step_metrics(
     trace,
     *,
@@ -67,19 +82,9 @@ def step_metrics(
     v_after: float | None = None,
 ) -> dict[str, float]:
     """Metrics of a velocity step at ``t0`` (see module docs); returns a dict of floats."""
-    t = _col(trace, "t")
-    if axis not in ("n", "e", "ne"):
-        raise DataError(f"axis must be 'n', 'e' or 'ne' (got {axis!r})")
-    cols = getattr(trace, "columns", trace)
-    swing_name = "swing_true_{}" if "swing_true_n" in cols else "swing_{}"
-    sn, se = _col(trace, swing_name.format("n")), _col(trace, swing_name.format("e"))
+    t, win, sn, se = _step_window(trace, t0, axis, t_end)
     vn, ve = _col(trace, "vn"), _col(trace, "ve")
     an, ae = _col(trace, "acc_sp_n"), _col(trace, "acc_sp_e")
-    if t_end is None:
-        t_end = float(t[-1])
-    win = (t >= t0) & (t <= t_end + 1e-9)
-    if win.sum() < 10:
-        raise DataError(f"too few samples after the step at t = {t0} s")
     pre = t < t0
     if axis == "ne":
         vsp_n, vsp_e = _col(trace, "vel_sp_n"), _col(trace, "vel_sp_e")
@@ -118,17 +123,7 @@ def step_metrics(
 def swing_iae_floor(trace, *, t0: float, axis: str = "n", t_end: float | None = None) -> float:
     """|∫(swing − final) dt| [deg·s] after the step at ``t0``, the swing along the step
     direction for ``ne``: the lower bound of ``swing_iae_deg_s`` (module docs)."""
-    t = _col(trace, "t")
-    if axis not in ("n", "e", "ne"):
-        raise DataError(f"axis must be 'n', 'e' or 'ne' (got {axis!r})")
-    cols = getattr(trace, "columns", trace)
-    swing_name = "swing_true_{}" if "swing_true_n" in cols else "swing_{}"
-    sn, se = _col(trace, swing_name.format("n")), _col(trace, swing_name.format("e"))
-    if t_end is None:
-        t_end = float(t[-1])
-    win = (t >= t0) & (t <= t_end + 1e-9)
-    if win.sum() < 10:
-        raise DataError(f"too few samples after the step at t = {t0} s")
+    t, win, sn, se = _step_window(trace, t0, axis, t_end)
     if axis == "ne":
         vsp = np.array([np.nanmedian(_col(trace, f"vel_sp_{a}")[win]) for a in "ne"])
         d = vsp / (float(np.hypot(*vsp)) or 1.0)
