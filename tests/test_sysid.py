@@ -525,7 +525,7 @@ def test_select_for_control_rejects_the_nmae_best_model_that_cannot_fly():
         flown[name] = step_metrics(trace, t0=2.0)
     assert flown["selected"]["ss_error"] < 0.02, flown
     assert math.isfinite(flown["selected"]["v_settle_s"]), flown
-    assert flown["nmae_best"]["ss_error"] > 0.1, flown  # the failure this guards against
+    assert flown["nmae_best"]["ss_error"] > 0.05, flown  # the failure this guards against
 
 
 def test_select_for_control_bounds():

@@ -310,20 +310,27 @@ fn run_linear(
 fn mpc_tracks_a_step_without_offset_under_a_constant_input_disturbance() {
     for q in [1, 2, 5] {
         let m = model(0.2, 1.0, q);
-        for dm in [DisturbanceModel::State, DisturbanceModel::Input] {
+        for (dm, measured_state) in [
+            (DisturbanceModel::State, false),
+            (DisturbanceModel::Input, false),
+            (DisturbanceModel::State, true),
+            (DisturbanceModel::Input, true),
+        ] {
             let s = MpcSettings {
                 acc_max: None,
                 disturbance: dm,
+                measured_state,
                 ..Default::default()
             };
             let mut ctrl = MpcController::new(&m, s).unwrap();
             let mut plant = LinearPlant::new(&m);
             let refs = |k: usize| vec![if k > 10 { 2.0 } else { 0.0 }];
-            let (_, vs, _) = run_linear(&mut ctrl, &mut plant, &refs, &[0.4], 1500);
+            // 6000 ticks (3 min): the default swing disturbance adapts slowly on purpose.
+            let (_, vs, _) = run_linear(&mut ctrl, &mut plant, &refs, &[0.4], 6000);
             let v_end = vs.last().unwrap()[0];
             assert!(
                 (v_end - 2.0).abs() < 1e-6,
-                "q = {q}, {dm:?}: v_end = {v_end}"
+                "q = {q}, {dm:?}, measured {measured_state}: v_end = {v_end}"
             );
             if dm == DisturbanceModel::Input {
                 // The input disturbance is identified exactly.
@@ -373,7 +380,7 @@ fn two_axis_mpc_tracks_both_axes_without_offset() {
         &mut plant,
         &|_| vec![1.0, -1.5],
         &[0.2, -0.3],
-        1500,
+        4000,
     );
     let v = vs.last().unwrap();
     assert!(
@@ -543,6 +550,9 @@ fn kalman_gain_solves_its_riccati_equation() {
     for i in 0..nx {
         w[(i, i)] = if i < nm {
             s.kf_process_noise.powi(2)
+        } else if m.states[i - nm].starts_with("swing") {
+            // `state` layout: one disturbance per newest-frame state, swing ones scaled.
+            (s.kf_disturbance_noise * s.kf_swing_disturbance_scale).powi(2)
         } else {
             s.kf_disturbance_noise.powi(2)
         };

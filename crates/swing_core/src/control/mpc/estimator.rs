@@ -107,6 +107,13 @@ impl SteadyStateKalman {
         &self.post
     }
 
+    /// Replace the measured block of the a-posteriori estimate by the measurement itself
+    /// (after [`Self::correct`]): the state is then the measured delay stack and only the
+    /// disturbances are estimated, from the one-step residual of the newest frame.
+    pub fn hold_measured(&mut self, y: &DVector<f64>) {
+        self.post.rows_mut(0, self.ny).copy_from(y);
+    }
+
     /// Time update with the applied input u: ξ̂_{k+1|k} = A ξ̂_{k|k} + B u + c̃.
     pub fn predict(&mut self, u: &DVector<f64>) {
         self.prior.copy_from(&self.c_tilde);
