@@ -107,8 +107,8 @@ impl Default for MpcSettings {
             kf_disturbance_noise: 0.02,
             // A swing disturbance that adapts as fast as the velocity one lets the estimator
             // explain a model's slow-mode mismatch as a payload force, and the loop creeps or
-            // runs away (24 of 91 seeded experiment flights with the NMAE-best model did
-            // not settle); at 0.1 that is 9 of 91, and the wind step settles to ≤ 0.001 m/s.
+            // runs away (24 of 84 seeded experiment flights with the NMAE-best model did
+            // not settle; benches/robustness.py); at 0.1 that is 9 of 84, and the wind step settles to ≤ 0.001 m/s.
             kf_swing_disturbance_scale: 0.1,
             kf_measurement_noise: 0.01,
             solver: QpSolverKind::ActiveSet,
