@@ -988,28 +988,15 @@ fn step_check_rejects_mismatched_plants_and_bad_settings() {
     let m = model(0.2, 1.0, 8);
     let mut other_dt = m.clone();
     other_dt.dt = 0.02;
-    let e = mpc_step_check(
-        &m,
-        MpcSettings::default(),
-        &other_dt,
-        &StepCheckSettings::default(),
-    );
-    assert!(
-        matches!(e, Err(ControlError::Model(ref s)) if s.contains("dt")),
-        "{e:?}"
-    );
     let mut other_input = m.clone();
     other_input.inputs = vec!["acc_sp_e".into()];
-    let e = mpc_step_check(
-        &m,
-        MpcSettings::default(),
-        &other_input,
-        &StepCheckSettings::default(),
-    );
-    assert!(
-        matches!(e, Err(ControlError::Model(ref s)) if s.contains("inputs")),
-        "{e:?}"
-    );
+    for (plant, needle) in [(other_dt, "dt"), (other_input, "inputs")] {
+        let e = mpc_step_check(&m, MpcSettings::default(), &plant, &Default::default());
+        assert!(
+            matches!(e, Err(ControlError::Model(ref s)) if s.contains(needle)),
+            "{needle}: {e:?}"
+        );
+    }
     for bad in [
         StepCheckSettings {
             step: 0.0,
