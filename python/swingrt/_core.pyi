@@ -169,13 +169,13 @@ class Lqr:
 
 def mpc_step_check(
     model_json: str,
-    plant_json: str,
+    plant_jsons: list[str],
     settings: dict[str, Any] | None = None,
     step: float = 2.0,
     t_step: float = 2.0,
     duration: float = 20.0,
-    input_lag: float = 0.0,
-) -> dict[str, float]: ...
+    input_lags: list[float] = ...,
+) -> list[dict[str, float]]: ...
 def care(
     A: npt.NDArray[np.float64],
     B: npt.NDArray[np.float64],

@@ -487,7 +487,8 @@ def select_for_control(
     leaves the velocity 0.2-0.8 m/s short after 30 s, even divergence). The ``candidates``
     stable (q, p) of lowest NMAE are refitted and, best NMAE first, the MPC designed on each
     (``mpc_settings``) flies the white-box model of the same flight in closed loop, with
-    each of ``input_lags`` [s] between controller and plant (:func:`swingrt._core.mpc_step_check`):
+    each of ``input_lags`` [s] between controller and plant
+    (:func:`swingrt._core.mpc_step_check`):
     hover, a ``step`` m/s step, hold. The first whose every run stays within ``bounds``
     (fractions of the step: ``overshoot``, ``final_error`` at 20 s, ``hold_drift``) is
     selected; with none passing, the one that misses its bounds least, and it says so.
@@ -502,6 +503,8 @@ def select_for_control(
         limits.update(bounds)
     if candidates < 1:
         raise ConfigError(f"candidates must be >= 1, not {candidates}")
+    if not input_lags:
+        raise ConfigError("input_lags needs at least one lag (0 = none)")
     fit = {k: v for k, v in fit.items() if k not in ("delays", "rank", "search")}
     plant = identify(data, method="whitebox", axes=axes, dt=fit.get("dt", 0.03))
     plants = [plant.to_json()] + [_with_vehicle_drag(plant, k) for k in vehicle_drag]
@@ -517,13 +520,9 @@ def select_for_control(
             model = result.model
         else:
             model = identify(data, method=method, axes=axes, delays=q, rank=p, **fit)
-        runs = [
-            _core.mpc_step_check(
-                model.to_json(), pj, mpc_settings or None, step=step, input_lag=lag
-            )
-            for pj in plants
-            for lag in input_lags
-        ]
+        runs = _core.mpc_step_check(
+            model.to_json(), plants, mpc_settings or None, step=step, input_lags=list(input_lags)
+        )
         worst = {k: max(r[k] for r in runs) for k in limits}
         ok = all(worst[k] <= limits[k] for k in limits)
         checked.append({"delays": q, "rank": p, "nmae": row["nmae"], "passed": ok, **worst})

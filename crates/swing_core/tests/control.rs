@@ -922,7 +922,7 @@ fn a_horizon_shorter_than_the_swing_period_underdamps_a_two_metre_cable() {
 
 #[test]
 fn step_check_on_its_own_model_matches_an_independent_loop() {
-    use swing_core::control::check::{mpc_step_check, StepCheckSettings};
+    use swing_core::control::check::{mpc_step_check, step_check_with, StepCheckSettings};
     let m = model(0.2, 1.0, 8);
     let check = StepCheckSettings {
         step: 1.5,
@@ -955,6 +955,14 @@ fn step_check_on_its_own_model_matches_an_independent_loop() {
     );
     assert!(r.final_error < 1e-3 && r.hold_drift < 1e-9, "{r:?}");
     assert!(r.passes(0.35, 0.03, 0.1));
+    // One design reused after another run (with a lag) gives the same check: reset is whole.
+    let mut reused = MpcController::new(&m, MpcSettings::default()).unwrap();
+    let lagged = StepCheckSettings {
+        input_lag: 0.1,
+        ..check
+    };
+    step_check_with(&mut reused, &m, &m, &lagged).unwrap();
+    assert_eq!(step_check_with(&mut reused, &m, &m, &check).unwrap(), r);
 }
 
 #[test]

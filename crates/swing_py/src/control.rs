@@ -390,39 +390,57 @@ fn pendulum_model_json(
     m.to_json().map_err(to_py)
 }
 
-/// Closed-loop step check of the MPC on `model_json` flying the linear plant `plant_json`
-/// (see `swing_core::control::check`): dict of `overshoot`, `final_error`, `hold_drift`, as
-/// fractions of the step.
+/// Closed-loop step checks of the MPC on `model_json` flying each linear plant of
+/// `plant_jsons` behind each of `input_lags` (see `swing_core::control::check`; the MPC is
+/// designed once): a list, plant-major, of dicts of `overshoot`, `final_error`,
+/// `hold_drift` as fractions of the step.
 #[pyfunction]
-#[pyo3(signature = (model_json, plant_json, settings=None, step=2.0, t_step=2.0, duration=20.0, input_lag=0.0))]
+#[pyo3(signature = (model_json, plant_jsons, settings=None, step=2.0, t_step=2.0, duration=20.0, input_lags=vec![0.0]))]
 #[allow(clippy::too_many_arguments)]
 fn mpc_step_check<'py>(
     py: Python<'py>,
     model_json: &str,
-    plant_json: &str,
+    plant_jsons: Vec<String>,
     settings: Option<&Bound<'py, PyDict>>,
     step: f64,
     t_step: f64,
     duration: f64,
-    input_lag: f64,
-) -> PyResult<Bound<'py, PyDict>> {
+    input_lags: Vec<f64>,
+) -> PyResult<Vec<Bound<'py, PyDict>>> {
     let model = parse_model(model_json)?;
-    let plant = parse_model(plant_json)?;
+    let plants = plant_jsons
+        .iter()
+        .map(|t| parse_model(t))
+        .collect::<PyResult<Vec<_>>>()?;
     let settings: MpcSettings = settings_from(py, settings)?;
-    let check = StepCheckSettings {
-        step,
-        t_step,
-        duration,
-        input_lag,
-    };
-    let r = py
-        .detach(|| check::mpc_step_check(&model, settings, &plant, &check))
+    let results = py
+        .detach(|| {
+            let mut mpc = MpcController::new(&model, settings)?;
+            let mut out = Vec::with_capacity(plants.len() * input_lags.len());
+            for plant in &plants {
+                for &input_lag in &input_lags {
+                    let check = StepCheckSettings {
+                        step,
+                        t_step,
+                        duration,
+                        input_lag,
+                    };
+                    out.push(check::step_check_with(&mut mpc, &model, plant, &check)?);
+                }
+            }
+            Ok::<_, ControlError>(out)
+        })
         .map_err(to_py)?;
-    let d = PyDict::new(py);
-    d.set_item("overshoot", r.overshoot)?;
-    d.set_item("final_error", r.final_error)?;
-    d.set_item("hold_drift", r.hold_drift)?;
-    Ok(d)
+    results
+        .into_iter()
+        .map(|r| {
+            let d = PyDict::new(py);
+            d.set_item("overshoot", r.overshoot)?;
+            d.set_item("final_error", r.final_error)?;
+            d.set_item("hold_drift", r.hold_drift)?;
+            Ok(d)
+        })
+        .collect()
 }
 
 /// Register this domain's functions and classes on the module.

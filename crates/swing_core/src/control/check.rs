@@ -146,9 +146,20 @@ pub fn mpc_step_check(
     plant: &LinearModel,
     check: &StepCheckSettings,
 ) -> Result<StepCheck, ControlError> {
+    let mut mpc = MpcController::new(controller, settings)?;
+    step_check_with(&mut mpc, controller, plant, check)
+}
+
+/// [`mpc_step_check`] with a controller already built on `controller` (reset at the start):
+/// one design, the costly part, serves several plants and lags.
+pub fn step_check_with(
+    mpc: &mut MpcController,
+    controller: &LinearModel,
+    plant: &LinearModel,
+    check: &StepCheckSettings,
+) -> Result<StepCheck, ControlError> {
     check.validate()?;
     let axes = plant_axes(controller, plant)?;
-    let mut mpc = MpcController::new(controller, settings)?;
     let m = axes.len();
     let dt = plant.dt;
     let ticks = (check.duration / dt).round() as usize;

@@ -14,7 +14,7 @@ pub mod check;
 pub mod lqr;
 pub mod mpc;
 
-pub use check::{mpc_step_check, StepCheck, StepCheckSettings};
+pub use check::{mpc_step_check, step_check_with, StepCheck, StepCheckSettings};
 pub use lqr::{care, dare, LqrController, LqrSettings, PendulumParams, RiccatiSolution};
 pub use mpc::{MpcController, MpcSettings, QpSolverKind};
 
