@@ -151,7 +151,7 @@ fn bench(c: &mut Criterion) {
     let count: usize = grid
         .delays
         .iter()
-        .map(|q| grid.ranks(*q, 2, 1, usize::MAX).len())
+        .map(|q| grid.ranks(*q, 2, 1, 0, usize::MAX).len())
         .sum();
     assert_eq!(count, 366);
     let search = SearchSettings {

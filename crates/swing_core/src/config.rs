@@ -88,6 +88,57 @@ pub fn all_finite(field: &str, v: &[f64]) -> Result<(), ConfigError> {
     Ok(())
 }
 
+/// Collapse a (possibly multi-line) parser message onto one line.
+pub fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+/// A serde error with its path → a [`ConfigError`] naming the dotted field.
+pub fn path_error<E: std::fmt::Display>(e: serde_path_to_error::Error<E>) -> ConfigError {
+    let path = e.path().to_string();
+    let path = if path == "." { String::new() } else { path };
+    let msg = one_line(&e.inner().to_string());
+    // toml/serde_json put the offending key in the message; drop their location suffixes.
+    let msg = msg
+        .split(" at line ")
+        .next()
+        .unwrap_or(&msg)
+        .trim_start_matches("TOML parse error ")
+        .to_string();
+    ConfigError::new(path, msg)
+}
+
+/// Deserialize settings from JSON text; unknown keys and bad values name the field.
+pub fn from_json_str<T: serde::de::DeserializeOwned>(text: &str) -> Result<T, ConfigError> {
+    let mut de = serde_json::Deserializer::from_str(text);
+    serde_path_to_error::deserialize(&mut de).map_err(path_error)
+}
+
+/// Deserialize settings from a TOML value; unknown keys and bad values name the field.
+pub fn from_toml_value<T: serde::de::DeserializeOwned>(v: toml::Value) -> Result<T, ConfigError> {
+    serde_path_to_error::deserialize(v).map_err(path_error)
+}
+
+/// Parse TOML text into a table; a syntax error is a [`ConfigError`] on one line.
+pub fn parse_toml(text: &str) -> Result<toml::Table, ConfigError> {
+    text.parse::<toml::Table>().map_err(|e| {
+        let msg = one_line(&e.to_string());
+        ConfigError::new("", msg.trim_start_matches("TOML parse error ").to_string())
+    })
+}
+
+/// Merge `over` into `base` key by key: tables merge recursively, anything else replaces.
+pub fn merge_tables(base: &mut toml::Table, over: toml::Table) {
+    for (k, v) in over {
+        match (base.get_mut(&k), v) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge_tables(b, o),
+            (_, v) => {
+                base.insert(k, v);
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -26,10 +26,19 @@ pub enum Category {
 pub trait Categorized {
     /// The category of this error.
     fn category(&self) -> Category;
+
+    /// The dotted settings field a configuration error is about, when it names one.
+    fn field(&self) -> Option<&str> {
+        None
+    }
 }
 
 impl Categorized for crate::config::ConfigError {
     fn category(&self) -> Category {
         Category::Config
+    }
+
+    fn field(&self) -> Option<&str> {
+        Some(&self.field)
     }
 }

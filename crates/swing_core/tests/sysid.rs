@@ -203,7 +203,6 @@ fn search_picks_true_delay_count() {
         delays: vec![1, 2, 3, 4, 5, 6],
         rank_start: 1,
         rank_step: 1,
-        rank_extra: 0,
         rank_window: None,
     };
     let settings = SearchSettings {
@@ -254,7 +253,6 @@ fn search_screens_unstable_candidates_and_coarse_to_fine_runs() {
         delays: vec![2, 4, 6],
         rank_start: 2,
         rank_step: 2,
-        rank_extra: 1,
         rank_window: None,
     };
     let res = coarse_to_fine(
@@ -557,7 +555,6 @@ fn search_without_stable_candidate_is_an_identification_error() {
         delays: vec![1, 2],
         rank_start: 1,
         rank_step: 1,
-        rank_extra: 0,
         rank_window: None,
     };
     let e = grid_search(

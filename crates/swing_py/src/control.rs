@@ -1,9 +1,9 @@
 //! Bindings of `swing_core::control`: the MPC and LQR controllers, the Riccati solvers and
 //! the MPC tick timing used by `swingrt bench`.
 //!
-//! Model JSON (`swingrt-model/1`, DESIGN §7) is read by `LinearModel::from_json`.
-//! Settings dicts are turned into JSON and read by the core's serde structs, so unknown
-//! keys and bad values raise `swingrt.errors.ConfigError` naming the field.
+//! Models cross as `LinearModel` objects; settings dicts are read by the core's serde
+//! structs, so unknown keys and bad values raise `swingrt.errors.ConfigError` naming the
+//! field.
 
 use nalgebra::DMatrix;
 use numpy::{
@@ -11,34 +11,15 @@ use numpy::{
 };
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use serde::Deserialize;
 use swing_core::control::check::{self, StepCheckSettings};
 use swing_core::control::lqr::{self, LqrController, LqrSettings, PendulumParams};
 use swing_core::control::mpc::timing::tick_timing;
 use swing_core::control::mpc::{MpcController, MpcSettings};
 use swing_core::control::{AxisState, ControlError, SwingController, TickInfo, TickKind};
-use swing_core::sysid::LinearModel;
 
+use crate::convert;
 use crate::errors::to_py;
-
-/// Parse a `swingrt-model/1` JSON text with the core's reader.
-fn parse_model(text: &str) -> PyResult<LinearModel> {
-    LinearModel::from_json(text).map_err(to_py)
-}
-
-/// A settings dict (or None) → settings struct through JSON and serde.
-fn settings_from<T: for<'de> Deserialize<'de> + Default>(
-    py: Python<'_>,
-    settings: Option<&Bound<'_, PyDict>>,
-) -> PyResult<T> {
-    match settings {
-        None => Ok(T::default()),
-        Some(d) => {
-            let text: String = py.import("json")?.call_method1("dumps", (d,))?.extract()?;
-            crate::sim::parse_settings(&text, "settings")
-        }
-    }
-}
+use crate::sysid::PyLinearModel;
 
 /// Read a state array of shape (axes, 3) — or (3,) for one axis — of [v, swing, swing_rate].
 fn read_state(arr: &PyReadonlyArrayDyn<'_, f64>, axes: usize) -> PyResult<Vec<AxisState>> {
@@ -123,15 +104,16 @@ pub struct PyMpc {
 
 #[pymethods]
 impl PyMpc {
+    /// Design the MPC on `model` with `settings` (a dict of `MpcSettings` fields).
     #[new]
-    #[pyo3(signature = (model_json, settings=None))]
+    #[pyo3(signature = (model, settings=None))]
     fn new(
         py: Python<'_>,
-        model_json: &str,
-        settings: Option<&Bound<'_, PyDict>>,
+        model: &PyLinearModel,
+        settings: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
-        let model = parse_model(model_json)?;
-        let s: MpcSettings = settings_from(py, settings)?;
+        let model = model.inner.clone();
+        let s: MpcSettings = convert::settings(settings, "settings")?;
         let inner = py.detach(|| MpcController::new(&model, s)).map_err(to_py)?;
         Ok(Self {
             inner,
@@ -202,8 +184,7 @@ impl PyMpc {
 
     /// The settings in use, as a dict.
     fn settings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        let text = serde_json::to_string(self.inner.settings()).expect("settings serialise");
-        py.import("json")?.call_method1("loads", (text,))
+        convert::to_py_object(py, self.inner.settings())
     }
 }
 
@@ -215,19 +196,17 @@ pub struct PyLqr {
 
 #[pymethods]
 impl PyLqr {
+    /// Design the LQR for the white-box `params` (a dict of `m_q`, `m_p`, `l`, `c`) on
+    /// `axes` axes with `settings` (a dict of `LqrSettings` fields).
     #[new]
-    #[pyo3(signature = (m_q, m_p, l, c=0.0, axes=1, settings=None))]
+    #[pyo3(signature = (params, axes=1, settings=None))]
     fn new(
-        py: Python<'_>,
-        m_q: f64,
-        m_p: f64,
-        l: f64,
-        c: f64,
+        params: &Bound<'_, PyAny>,
         axes: usize,
-        settings: Option<&Bound<'_, PyDict>>,
+        settings: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
-        let s: LqrSettings = settings_from(py, settings)?;
-        let p = PendulumParams { m_q, m_p, l, c };
+        let s: LqrSettings = convert::settings(settings, "settings")?;
+        let p: PendulumParams = convert::from_py(params, "params")?;
         Ok(Self {
             inner: LqrController::new(p, axes, s).map_err(to_py)?,
         })
@@ -348,16 +327,16 @@ fn dare<'py>(
 /// Time `n_ticks` MPC ticks in Rust (closed loop on the model itself; constrained: only
 /// ticks that solved the QP): {"median", "p99", "max", "mean" [µs], "ticks"}.
 #[pyfunction]
-#[pyo3(signature = (model_json, settings=None, n_ticks=2000, constrained=false))]
+#[pyo3(signature = (model, settings=None, n_ticks=2000, constrained=false))]
 fn mpc_tick_timing<'py>(
     py: Python<'py>,
-    model_json: &str,
-    settings: Option<&Bound<'py, PyDict>>,
+    model: &PyLinearModel,
+    settings: Option<&Bound<'py, PyAny>>,
     n_ticks: usize,
     constrained: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let model = parse_model(model_json)?;
-    let s: MpcSettings = settings_from(py, settings)?;
+    let model = model.inner.clone();
+    let s: MpcSettings = convert::settings(settings, "settings")?;
     let t = py
         .detach(|| tick_timing(&model, &s, n_ticks, constrained))
         .map_err(to_py)?;
@@ -370,12 +349,13 @@ fn mpc_tick_timing<'py>(
     Ok(d)
 }
 
-/// The white-box pendulum fitted in `delays` delay coordinates (seeded), as model JSON:
-/// a realistic stand-in for an identified model in benchmarks and tests.
+/// The white-box pendulum fitted in `delays` delay coordinates (seeded): a realistic
+/// stand-in for an identified model in benchmarks and tests.
 #[pyfunction]
 #[pyo3(signature = (m_q=0.952, m_p=0.2, l=1.0, c=0.002, dt=0.03, delays=50, axes=1, seed=7))]
 #[allow(clippy::too_many_arguments)]
-fn pendulum_model_json(
+fn pendulum_model(
+    py: Python<'_>,
     m_q: f64,
     m_p: f64,
     l: f64,
@@ -384,10 +364,10 @@ fn pendulum_model_json(
     delays: usize,
     axes: usize,
     seed: u64,
-) -> PyResult<String> {
+) -> PyResult<PyLinearModel> {
     let p = PendulumParams { m_q, m_p, l, c };
     let m = lqr::pendulum_delay_model(&p, dt, delays, axes, seed).map_err(to_py)?;
-    m.to_json().map_err(to_py)
+    PyLinearModel::wrap(py, m)
 }
 
 /// Closed-loop step checks of the MPC on `model_json` flying each linear plant of
@@ -395,24 +375,21 @@ fn pendulum_model_json(
 /// designed once): a list, plant-major, of dicts of `overshoot`, `final_error`,
 /// `hold_drift` as fractions of the step.
 #[pyfunction]
-#[pyo3(signature = (model_json, plant_jsons, settings=None, step=2.0, t_step=2.0, duration=20.0, input_lags=vec![0.0]))]
+#[pyo3(signature = (model, plants, settings=None, step=2.0, t_step=2.0, duration=20.0, input_lags=vec![0.0]))]
 #[allow(clippy::too_many_arguments)]
 fn mpc_step_check<'py>(
     py: Python<'py>,
-    model_json: &str,
-    plant_jsons: Vec<String>,
-    settings: Option<&Bound<'py, PyDict>>,
+    model: &PyLinearModel,
+    plants: Vec<PyRef<'py, PyLinearModel>>,
+    settings: Option<&Bound<'py, PyAny>>,
     step: f64,
     t_step: f64,
     duration: f64,
     input_lags: Vec<f64>,
 ) -> PyResult<Vec<Bound<'py, PyDict>>> {
-    let model = parse_model(model_json)?;
-    let plants = plant_jsons
-        .iter()
-        .map(|t| parse_model(t))
-        .collect::<PyResult<Vec<_>>>()?;
-    let settings: MpcSettings = settings_from(py, settings)?;
+    let model = model.inner.clone();
+    let plants: Vec<_> = plants.iter().map(|p| p.inner.clone()).collect();
+    let settings: MpcSettings = convert::settings(settings, "settings")?;
     let results = py
         .detach(|| {
             let mut mpc = MpcController::new(&model, settings)?;
@@ -450,7 +427,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(care, m)?)?;
     m.add_function(wrap_pyfunction!(dare, m)?)?;
     m.add_function(wrap_pyfunction!(mpc_tick_timing, m)?)?;
-    m.add_function(wrap_pyfunction!(pendulum_model_json, m)?)?;
+    m.add_function(wrap_pyfunction!(pendulum_model, m)?)?;
     m.add_function(wrap_pyfunction!(mpc_step_check, m)?)?;
     Ok(())
 }

@@ -19,12 +19,23 @@ fn class_name(cat: Category) -> &'static str {
 
 /// Build a `swingrt.errors` exception of the given category carrying `msg`.
 pub fn raise(cat: Category, msg: impl Into<String>) -> PyErr {
-    let msg = msg.into();
+    raise_with_field(cat, msg.into(), None)
+}
+
+/// Build a `swingrt.errors` exception; a `ConfigError` also carries the dotted `field`.
+fn raise_with_field(cat: Category, msg: String, field: Option<&str>) -> PyErr {
     Python::attach(|py| {
         let built = py
             .import("swingrt.errors")
             .and_then(|m| m.getattr(class_name(cat)))
-            .and_then(|cls| cls.call1((msg.clone(),)));
+            .and_then(|cls| match field {
+                Some(f) if cat == Category::Config => {
+                    let kw = pyo3::types::PyDict::new(py);
+                    kw.set_item("field", f)?;
+                    cls.call((msg.clone(),), Some(&kw))
+                }
+                _ => cls.call1((msg.clone(),)),
+            });
         match built {
             Ok(inst) => PyErr::from_value(inst),
             // The Python package is always importable when the extension is; keep a sane
@@ -36,5 +47,5 @@ pub fn raise(cat: Category, msg: impl Into<String>) -> PyErr {
 
 /// Convert any categorized core error into the matching Python exception.
 pub fn to_py<E: Categorized + std::fmt::Display>(e: E) -> PyErr {
-    raise(e.category(), e.to_string())
+    raise_with_field(e.category(), e.to_string(), e.field())
 }

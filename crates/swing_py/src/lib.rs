@@ -6,6 +6,7 @@
 use pyo3::prelude::*;
 
 mod control;
+mod convert;
 mod errors;
 mod sim;
 mod sysid;

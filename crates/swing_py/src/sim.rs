@@ -7,26 +7,10 @@ use swing_core::control::lqr::{LqrController, LqrSettings, PendulumParams};
 use swing_core::control::mpc::{MpcController, MpcSettings};
 use swing_core::control::px4::AxisSetpoint;
 use swing_core::sim::{Scenario, Simulator, Trace};
-use swing_core::sysid::LinearModel;
 use swing_core::ConfigError;
 
 use crate::errors::to_py;
-
-/// Parse a settings struct from JSON; unknown keys and bad values name the field.
-pub fn parse_settings<T: serde::de::DeserializeOwned>(json: &str, section: &str) -> PyResult<T> {
-    let mut de = serde_json::Deserializer::from_str(json);
-    serde_path_to_error::deserialize(&mut de).map_err(|e| {
-        let path = e.path().to_string();
-        to_py(ConfigError::new(
-            if path == "." {
-                section.to_string()
-            } else {
-                format!("{section}.{path}")
-            },
-            e.inner().to_string(),
-        ))
-    })
-}
+use crate::sysid::PyLinearModel;
 
 fn trace_to_dict<'py>(py: Python<'py>, trace: Trace) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
@@ -36,83 +20,158 @@ fn trace_to_dict<'py>(py: Python<'py>, trace: Trace) -> PyResult<Bound<'py, PyDi
     Ok(d)
 }
 
-fn parse(json: &str) -> PyResult<Scenario> {
-    Scenario::from_json(json).map_err(to_py)
+/// A complete, validated simulation scenario (vehicle, payload, wind, noise, PX4 gains,
+/// schedule). Built from a built-in base plus TOML text or a dict, merged in the core.
+#[pyclass(name = "Scenario", module = "swingrt._core", frozen)]
+#[derive(Clone)]
+pub struct PyScenario {
+    /// The core scenario.
+    pub inner: Scenario,
 }
 
-/// Validate a TOML scenario and return it, defaults filled in, as JSON.
-#[pyfunction]
-fn scenario_from_toml(text: &str) -> PyResult<String> {
-    let sc = Scenario::from_toml(text).map_err(to_py)?;
-    Ok(serde_json::to_string(&sc).expect("scenario serialises"))
+fn overrides(obj: &Bound<'_, PyAny>) -> PyResult<toml::Table> {
+    crate::convert::from_py(obj, "")
 }
 
-/// Validate a JSON scenario and return it, defaults filled in, as JSON.
-#[pyfunction]
-fn scenario_from_json(text: &str) -> PyResult<String> {
-    Ok(serde_json::to_string(&parse(text)?).expect("scenario serialises"))
-}
+#[pymethods]
+impl PyScenario {
+    /// A built-in scenario: `step` (simulate), `training` (collect) or `hover`.
+    #[staticmethod]
+    #[pyo3(signature = (name="step"))]
+    fn builtin(name: &str) -> PyResult<Self> {
+        Ok(Self {
+            inner: Scenario::builtin(name).map_err(to_py)?,
+        })
+    }
 
-/// A built-in scenario as JSON: `step` (simulate) or `training` (collect).
-#[pyfunction]
-fn default_scenario(kind: &str) -> PyResult<String> {
-    let sc = match kind {
-        "step" => Scenario::default_step(),
-        "training" => Scenario::default_training(),
-        other => {
-            return Err(to_py(ConfigError::new(
-                "scenario",
-                format!("unknown built-in scenario {other:?} (use \"step\" or \"training\")"),
-            )))
+    /// TOML text merged over the built-in scenario `base` (tables merge key by key).
+    #[staticmethod]
+    #[pyo3(signature = (text, base="step"))]
+    fn from_toml(text: &str, base: &str) -> PyResult<Self> {
+        Ok(Self {
+            inner: Scenario::from_toml_over(text, base).map_err(to_py)?,
+        })
+    }
+
+    /// A dict merged over the built-in scenario `base`.
+    #[staticmethod]
+    #[pyo3(signature = (overrides, base="step"))]
+    fn from_dict(overrides: &Bound<'_, PyAny>, base: &str) -> PyResult<Self> {
+        let over = self::overrides(overrides)?;
+        let base = Scenario::builtin(base).map_err(to_py)?;
+        Ok(Self {
+            inner: base.with_overrides(over).map_err(to_py)?,
+        })
+    }
+
+    /// Parse complete scenario JSON (what `to_json` writes).
+    #[staticmethod]
+    fn from_json(text: &str) -> PyResult<Self> {
+        Ok(Self {
+            inner: Scenario::from_json(text).map_err(to_py)?,
+        })
+    }
+
+    /// This scenario with a dict of overrides merged in (tables merge key by key).
+    fn with_overrides(&self, overrides: &Bound<'_, PyAny>) -> PyResult<Self> {
+        let over = self::overrides(overrides)?;
+        Ok(Self {
+            inner: self.inner.with_overrides(over).map_err(to_py)?,
+        })
+    }
+
+    /// Every field as a dict.
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        crate::convert::to_py_object(py, &self.inner)
+    }
+
+    /// Every field as JSON text.
+    fn to_json(&self) -> PyResult<String> {
+        serde_json::to_string(&self.inner).map_err(|e| crate::convert::data_err(e.to_string()))
+    }
+
+    /// Every field as TOML text.
+    fn to_toml(&self) -> String {
+        self.inner.to_toml()
+    }
+
+    /// Name used in reports.
+    #[getter]
+    fn name(&self) -> &str {
+        &self.inner.name
+    }
+
+    /// Simulated duration [s].
+    #[getter]
+    fn duration(&self) -> f64 {
+        self.inner.duration
+    }
+
+    /// Seed of every random generator of the run.
+    #[getter]
+    fn seed(&self) -> u64 {
+        self.inner.seed
+    }
+
+    /// Physics step [s].
+    #[getter]
+    fn physics_dt(&self) -> f64 {
+        self.inner.physics_dt
+    }
+
+    /// Normalised hover thrust PX4's estimator settles on for this vehicle and payload.
+    fn hover_thrust(&self) -> f64 {
+        self.inner.hover_thrust()
+    }
+
+    /// The setpoint schedule (explicit entries and seeded random steps) as dicts.
+    fn schedule<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        crate::convert::to_py_object(py, &self.inner.schedule())
+    }
+
+    fn __eq__(&self, other: &Bound<'_, PyAny>) -> bool {
+        match other.cast::<PyScenario>() {
+            Ok(o) => self.inner == o.get().inner,
+            Err(_) => false,
         }
-    };
-    Ok(serde_json::to_string(&sc).expect("scenario serialises"))
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Scenario({:?}, duration={} s, seed={}, payload={:?})",
+            self.inner.name, self.inner.duration, self.inner.seed, self.inner.payload.kind
+        )
+    }
+
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, (String,))> {
+        let text = serde_json::to_string(&slf.get().inner)
+            .map_err(|e| crate::convert::data_err(e.to_string()))?;
+        Ok((slf.get_type().getattr("from_json")?, (text,)))
+    }
 }
 
-/// A scenario (JSON) as TOML text.
-#[pyfunction]
-fn scenario_to_toml(json: &str) -> PyResult<String> {
-    Ok(parse(json)?.to_toml())
-}
-
-/// Run a whole scenario (JSON) and return its trace as a dict of numpy arrays.
-#[pyfunction]
-fn run_scenario<'py>(py: Python<'py>, json: &str) -> PyResult<Bound<'py, PyDict>> {
-    let sc = parse(json)?;
-    let trace = py.detach(|| Simulator::run(sc)).map_err(to_py)?;
-    trace_to_dict(py, trace)
-}
-
-/// Simulated seconds per wall second of the full loop (with the scenario's payload),
+/// Simulated seconds per wall second of the full loop of `scenario` (with its payload),
 /// measured over `seconds` of simulated flight on the calling thread.
 #[pyfunction]
-fn sim_real_time_factor(py: Python<'_>, json: &str, seconds: f64) -> PyResult<f64> {
-    let mut sc = parse(json)?;
-    sc.duration = seconds;
-    py.detach(|| {
-        let mut sim = Simulator::new(sc)?;
-        let t0 = std::time::Instant::now();
-        sim.run_to_end()?;
-        Ok::<f64, swing_core::sim::SimError>(seconds / t0.elapsed().as_secs_f64())
-    })
-    .map_err(to_py)
+fn sim_real_time_factor(py: Python<'_>, scenario: &PyScenario, seconds: f64) -> PyResult<f64> {
+    let sc = scenario.inner.clone();
+    py.detach(|| swing_core::sim::real_time_factor(sc, seconds))
+        .map_err(to_py)
 }
 
 /// The steppable closed-loop simulator (vehicle, payload, PX4 cascade, wind).
 #[pyclass(name = "Simulator", module = "swingrt._core", unsendable)]
 pub struct PySimulator {
-    /// The core simulator (also used by the control bindings to attach controllers).
-    pub inner: Simulator,
+    inner: Simulator,
 }
 
 #[pymethods]
 impl PySimulator {
-    /// Build from a scenario given as JSON text.
+    /// Build from a scenario.
     #[new]
-    fn new(json: &str) -> PyResult<Self> {
-        let sc = parse(json)?;
+    fn new(scenario: &PyScenario) -> PyResult<Self> {
         Ok(Self {
-            inner: Simulator::new(sc).map_err(to_py)?,
+            inner: Simulator::new(scenario.inner.clone()).map_err(to_py)?,
         })
     }
 
@@ -245,47 +304,36 @@ impl PySimulator {
         self.inner.tick_stats().tick_us.clone().into_pyarray(py)
     }
 
-    /// Fly the MPC on an identified model (swingrt-model/1 JSON) in place of PX4's velocity
-    /// PID on the model's axes from `engage_at` [s]; `budget` [s] per tick before fallback.
-    #[pyo3(signature = (model_json, settings_json, engage_at, budget))]
+    /// Fly the MPC on an identified model in place of PX4's velocity PID on the model's axes
+    /// from `engage_at` [s]; `budget` [s] per tick before fallback.
+    #[pyo3(signature = (model, settings, engage_at, budget))]
     fn attach_mpc(
         &mut self,
-        model_json: &str,
-        settings_json: Option<&str>,
+        model: &PyLinearModel,
+        settings: Option<&Bound<'_, PyAny>>,
         engage_at: f64,
         budget: f64,
     ) -> PyResult<()> {
-        let model = LinearModel::from_json(model_json).map_err(to_py)?;
-        let settings = match settings_json {
-            Some(t) => parse_settings::<MpcSettings>(t, "mpc")?,
-            None => MpcSettings::default(),
-        };
-        let mpc = MpcController::new(&model, settings).map_err(to_py)?;
+        let settings: MpcSettings = crate::convert::settings(settings, "mpc")?;
+        let mpc = MpcController::new(&model.inner, settings).map_err(to_py)?;
         self.inner
             .attach_controller(Box::new(mpc), engage_at, budget)
             .map_err(to_py)
     }
 
-    /// Fly the baseline LQR (eq. 5.12–5.20) with the given white-box parameters on `axes`
-    /// axes (1 = N, 2 = N+E) from `engage_at` [s].
-    #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (m_q, m_p, l, c, axes, settings_json, engage_at, budget))]
+    /// Fly the baseline LQR (eq. 5.12–5.20) with the white-box `params` (a dict of `m_q`,
+    /// `m_p`, `l`, `c`) on `axes` axes (1 = N, 2 = N+E) from `engage_at` [s].
+    #[pyo3(signature = (params, axes, settings, engage_at, budget))]
     fn attach_lqr(
         &mut self,
-        m_q: f64,
-        m_p: f64,
-        l: f64,
-        c: f64,
+        params: &Bound<'_, PyAny>,
         axes: usize,
-        settings_json: Option<&str>,
+        settings: Option<&Bound<'_, PyAny>>,
         engage_at: f64,
         budget: f64,
     ) -> PyResult<()> {
-        let settings = match settings_json {
-            Some(t) => parse_settings::<LqrSettings>(t, "lqr")?,
-            None => LqrSettings::default(),
-        };
-        let params = PendulumParams { m_q, m_p, l, c };
+        let settings: LqrSettings = crate::convert::settings(settings, "lqr")?;
+        let params: PendulumParams = crate::convert::from_py(params, "lqr_params")?;
         let lqr = LqrController::new(params, axes, settings).map_err(to_py)?;
         self.inner
             .attach_controller(Box::new(lqr), engage_at, budget)
@@ -308,11 +356,7 @@ impl PySimulator {
 
 /// Register this domain's functions and classes on the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(scenario_from_toml, m)?)?;
-    m.add_function(wrap_pyfunction!(scenario_from_json, m)?)?;
-    m.add_function(wrap_pyfunction!(scenario_to_toml, m)?)?;
-    m.add_function(wrap_pyfunction!(default_scenario, m)?)?;
-    m.add_function(wrap_pyfunction!(run_scenario, m)?)?;
+    m.add_class::<PyScenario>()?;
     m.add_function(wrap_pyfunction!(sim_real_time_factor, m)?)?;
     m.add_class::<PySimulator>()?;
     Ok(())

@@ -1,317 +1,471 @@
-//! Bindings of `swing_core::sysid`: conversion and error mapping only.
+//! Bindings of `swing_core::sysid`: the `LinearModel` and `Search` classes and the
+//! identification entry points. Conversion and error mapping only.
 //!
-//! Models cross the boundary as `swingrt-model/1` JSON text (validated by the core on the
-//! way in); data as C-contiguous float64 arrays of shape (samples, columns), borrowed
-//! without copies. Long calls release the GIL.
+//! Data cross as C-contiguous float64 arrays of shape (samples, columns), borrowed without
+//! copies; models as `LinearModel` objects (JSON only for files and pickling); settings as
+//! dicts read by the core's serde structs. Long calls release the GIL.
 
-use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use std::sync::Arc;
+
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use pyo3::types::PyList;
-use swing_core::sysid::dmdc::{self, DmdcSettings};
-use swing_core::sysid::havokc::{self, HavokcSettings};
+use pyo3::types::{PyDict, PyList};
+use swing_core::control::mpc::MpcSettings;
+use swing_core::control::selection::{self, SelectionSettings};
 use swing_core::sysid::metrics::rollout_nmae;
-use swing_core::sysid::search::{coarse_to_fine, grid_search, Grid, Method, SearchSettings};
-use swing_core::sysid::whitebox::{self, WhiteboxParams};
-use swing_core::sysid::{smooth, LinearModel, Offset, SysidError, Trajectory};
+use swing_core::sysid::pipeline::{self, candidate_row, ThrustLog};
+use swing_core::sysid::search::SearchResult;
+use swing_core::sysid::{smooth, whitebox, IdentifySettings, LinearModel, Trajectory};
 use swing_core::Category;
 
+use crate::convert::{array1, array2, cols, data_err, from_py, to_py_object};
 use crate::errors::{raise, to_py};
 
-fn data_err(msg: impl Into<String>) -> PyErr {
-    raise(Category::Data, msg)
+/// A discrete linear model over delay coordinates (`swingrt-model/1`):
+/// z_{k+1} = A z_k + B (u_k − input_mean) + c, z_k = [x_k; …; x_{k−q+1}] (newest first).
+#[pyclass(name = "LinearModel", module = "swingrt._core", frozen)]
+pub struct PyLinearModel {
+    /// The core model (shared, immutable).
+    pub inner: Arc<LinearModel>,
+    a: Py<PyArray2<f64>>,
+    b: Py<PyArray2<f64>>,
+    c: Py<PyArray1<f64>>,
 }
 
-/// Borrow a 2-D float64 C-contiguous array, or raise `DataError` naming it.
-fn array2<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<PyReadonlyArray2<'py, f64>> {
-    let arr: PyReadonlyArray2<'py, f64> = obj
-        .extract()
-        .map_err(|_| data_err(format!("{name} must be a 2-D numpy array of float64")))?;
-    // as_slice also accepts Fortran order, which would scramble the time-major layout.
-    if !arr.is_c_contiguous() {
-        return Err(data_err(format!("{name} must be C-contiguous")));
-    }
-    Ok(arr)
+fn readonly2<'py>(py: Python<'py>, m: &nalgebra::DMatrix<f64>) -> PyResult<Py<PyArray2<f64>>> {
+    let rows: Vec<Vec<f64>> = (0..m.nrows())
+        .map(|i| m.row(i).iter().copied().collect())
+        .collect();
+    let arr = if m.nrows() == 0 {
+        PyArray2::<f64>::zeros(py, [0, m.ncols()], false)
+    } else {
+        PyArray2::from_vec2(py, &rows).map_err(|e| data_err(e.to_string()))?
+    };
+    arr.readwrite().make_nonwriteable();
+    Ok(arr.unbind())
 }
 
-/// Borrow a 1-D float64 contiguous array, or raise `DataError` naming it.
-fn array1<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<PyReadonlyArray1<'py, f64>> {
-    let arr: PyReadonlyArray1<'py, f64> = obj
-        .extract()
-        .map_err(|_| data_err(format!("{name} must be a 1-D numpy array of float64")))?;
-    if arr.as_slice().is_err() {
-        return Err(data_err(format!("{name} must be contiguous")));
-    }
-    Ok(arr)
-}
-
-/// Columns of a 2-D array.
-fn cols(a: &PyReadonlyArray2<'_, f64>) -> usize {
-    a.shape()[1]
-}
-
-fn parse_offset(s: &str) -> PyResult<Offset> {
-    Offset::parse(s).map_err(to_py)
-}
-
-fn named(mut m: LinearModel, states: Vec<String>, inputs: Vec<String>) -> PyResult<LinearModel> {
-    if states.len() != m.n() || inputs.len() != m.m() {
-        return Err(data_err(format!(
-            "{} state names and {} input names for {} states and {} inputs",
-            states.len(),
-            inputs.len(),
-            m.n(),
-            m.m()
-        )));
-    }
-    m.states = states;
-    m.inputs = inputs;
-    Ok(m)
-}
-
-fn model_from(text: &str) -> PyResult<LinearModel> {
-    LinearModel::from_json(text).map_err(to_py)
-}
-
-/// Fit DMDc (eq. 4.9–4.15) to states `x` (N, n) and inputs `u` (N, m); returns model JSON.
-#[pyfunction]
-#[pyo3(signature = (x, u, states, inputs, *, delays, rank=None, offset="affine", dt=0.03, method="dmdc"))]
-#[allow(clippy::too_many_arguments)]
-fn sysid_fit(
-    py: Python<'_>,
-    x: &Bound<'_, PyAny>,
-    u: &Bound<'_, PyAny>,
-    states: Vec<String>,
-    inputs: Vec<String>,
-    delays: usize,
-    rank: Option<usize>,
-    offset: &str,
-    dt: f64,
-    method: &str,
-) -> PyResult<String> {
-    let (xa, ua) = (array2(x, "x")?, array2(u, "u")?);
-    let offset = parse_offset(offset)?;
-    let (n, m) = (cols(&xa), cols(&ua));
-    let (xs, us) = (xa.as_slice()?, ua.as_slice()?);
-    let method = method.to_string();
-    let model = py
-        .detach(|| {
-            let traj = Trajectory::new(xs, n, us, m)?;
-            match method.as_str() {
-                "dmdc" => dmdc::fit(
-                    &traj,
-                    &DmdcSettings {
-                        delays,
-                        rank,
-                        offset,
-                        dt,
-                    },
-                ),
-                "havokc" => havokc::fit(
-                    &traj,
-                    &HavokcSettings {
-                        delays,
-                        rank,
-                        offset,
-                        dt,
-                    },
-                ),
-                other => Err(SysidError::Config(format!(
-                    "method must be dmdc or havokc, not {other:?}"
-                ))),
-            }
+impl PyLinearModel {
+    /// Wrap a core model (validated by the caller).
+    pub fn wrap(py: Python<'_>, model: LinearModel) -> PyResult<Self> {
+        let a = readonly2(py, &model.a)?;
+        let b = readonly2(py, &model.b)?;
+        let c = PyArray1::from_slice(py, model.c.as_slice());
+        c.readwrite().make_nonwriteable();
+        Ok(Self {
+            inner: Arc::new(model),
+            a,
+            b,
+            c: c.unbind(),
         })
-        .map_err(to_py)?;
-    named(model, states, inputs)?.to_json().map_err(to_py)
+    }
+
+    fn parse(py: Python<'_>, text: &str) -> PyResult<Self> {
+        let model = LinearModel::from_json(text).map_err(to_py)?;
+        Self::wrap(py, model)
+    }
 }
 
-/// Grid or coarse→fine search; returns (model JSON, table rows, index of the best row).
-///
-/// Table rows are (q, p, nmae, per_state list, stable or None, spectral radius or None).
-#[pyfunction]
-#[pyo3(signature = (x_train, u_train, x_test, u_test, states, inputs, *, method="dmdc",
-    offset="affine", dt=0.03, horizon=667, starts=10, delays=None, rank_start=5, rank_step=5,
-    rank_extra=0, fine=None, stability_tolerance=1e-3))]
-#[allow(clippy::too_many_arguments)]
-fn sysid_search<'py>(
-    py: Python<'py>,
-    x_train: &Bound<'py, PyAny>,
-    u_train: &Bound<'py, PyAny>,
-    x_test: &Bound<'py, PyAny>,
-    u_test: &Bound<'py, PyAny>,
-    states: Vec<String>,
-    inputs: Vec<String>,
-    method: &str,
-    offset: &str,
-    dt: f64,
-    horizon: usize,
-    starts: usize,
-    delays: Option<Vec<usize>>,
-    rank_start: usize,
-    rank_step: usize,
-    rank_extra: usize,
-    fine: Option<(usize, usize)>,
-    stability_tolerance: f64,
-) -> PyResult<(String, Bound<'py, PyList>, usize)> {
-    let (xa, ua) = (array2(x_train, "x_train")?, array2(u_train, "u_train")?);
-    let (xb, ub) = (array2(x_test, "x_test")?, array2(u_test, "u_test")?);
-    let method = match method {
-        "dmdc" => Method::Dmdc,
-        "havokc" => Method::Havokc,
-        other => {
+#[pymethods]
+impl PyLinearModel {
+    /// Parse and validate `swingrt-model/1` JSON text (`ModelError` naming the problem).
+    #[staticmethod]
+    fn from_json(py: Python<'_>, text: &str) -> PyResult<Self> {
+        Self::parse(py, text)
+    }
+
+    /// Read a model file (`ModelError` naming the file and the problem).
+    #[staticmethod]
+    fn load(py: Python<'_>, path: std::path::PathBuf) -> PyResult<Self> {
+        let shown = path.display().to_string();
+        if !path.is_file() {
             return Err(raise(
-                Category::Config,
-                format!("search method must be dmdc or havokc, not {other:?}"),
-            ))
+                Category::Model,
+                format!("{shown}: no such model file"),
+            ));
         }
-    };
-    let settings = SearchSettings {
-        method,
-        offset: parse_offset(offset)?,
-        dt,
-        horizon,
-        starts,
-        stability_tolerance,
-    };
-    let grid = Grid {
-        delays: delays.unwrap_or_else(|| Grid::reference().delays),
-        rank_start,
-        rank_step,
-        rank_extra,
-        rank_window: None,
-    };
-    let (n, m) = (cols(&xa), cols(&ua));
-    let (n2, m2) = (cols(&xb), cols(&ub));
-    let (s1, s2, s3, s4) = (
-        xa.as_slice()?,
-        ua.as_slice()?,
-        xb.as_slice()?,
-        ub.as_slice()?,
-    );
-    let res = py
-        .detach(|| {
-            let train = Trajectory::new(s1, n, s2, m)?;
-            let test = Trajectory::new(s3, n2, s4, m2)?;
-            match fine {
-                Some((qr, pr)) => coarse_to_fine(&train, &test, &grid, qr, pr, &settings),
-                None => grid_search(&train, &test, &grid, &settings),
-            }
-        })
-        .map_err(to_py)?;
-    let rows = PyList::empty(py);
-    for c in &res.table {
-        rows.append((
-            c.delays,
-            c.rank,
-            c.nmae,
-            c.per_state.clone(),
-            c.stable,
-            c.spectral_radius,
-        ))?;
+        let text = std::fs::read_to_string(&path)
+            .map_err(|e| raise(Category::Model, format!("{shown}: cannot read: {e}")))?;
+        let model = LinearModel::from_json(&text)
+            .map_err(|e| raise(Category::Model, format!("{shown}: {e}")))?;
+        Self::wrap(py, model)
     }
-    let json = named(res.model, states, inputs)?.to_json().map_err(to_py)?;
-    Ok((json, rows, res.best))
+
+    /// The `swingrt-model/1` JSON text.
+    fn to_json(&self) -> PyResult<String> {
+        self.inner.to_json().map_err(to_py)
+    }
+
+    /// Write the JSON atomically (a temporary file beside `path`, then a rename).
+    fn save(&self, path: std::path::PathBuf) -> PyResult<()> {
+        let text = self.inner.to_json().map_err(to_py)? + "\n";
+        crate::convert::write_atomic(&path, &text).map_err(|e| {
+            raise(
+                Category::Data,
+                format!("{}: cannot write: {e}", path.display()),
+            )
+        })
+    }
+
+    /// State matrix A, (n·q) × (n·q) (read-only).
+    #[getter(A)]
+    fn a<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        self.a.bind(py).clone()
+    }
+
+    /// Input matrix B, (n·q) × m (read-only).
+    #[getter(B)]
+    fn b<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        self.b.bind(py).clone()
+    }
+
+    /// Constant term c, n·q (read-only).
+    #[getter]
+    fn c<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.c.bind(py).clone()
+    }
+
+    /// Identification method: `dmdc`, `havokc` or `whitebox`.
+    #[getter]
+    fn method(&self) -> &str {
+        &self.inner.method
+    }
+
+    /// Sample time [s].
+    #[getter]
+    fn dt(&self) -> f64 {
+        self.inner.dt
+    }
+
+    /// Number of stacked frames q.
+    #[getter]
+    fn delays(&self) -> usize {
+        self.inner.delays
+    }
+
+    /// SVD truncation rank p (0 when not applicable).
+    #[getter]
+    fn rank(&self) -> usize {
+        self.inner.rank
+    }
+
+    /// Names of the physical states.
+    #[getter]
+    fn states(&self) -> Vec<String> {
+        self.inner.states.clone()
+    }
+
+    /// Names of the inputs.
+    #[getter]
+    fn inputs(&self) -> Vec<String> {
+        self.inner.inputs.clone()
+    }
+
+    /// Offset handling: `none`, `mean` or `affine`.
+    #[getter]
+    fn offset(&self) -> &'static str {
+        self.inner.offset.name()
+    }
+
+    /// Input mean subtracted before B.
+    #[getter]
+    fn input_mean<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, &self.inner.input_mean)
+    }
+
+    /// Fingerprint of the training data (empty when unknown).
+    #[getter]
+    fn fingerprint(&self) -> &str {
+        &self.inner.fingerprint
+    }
+
+    /// Dimension n·q of the stacked state.
+    #[getter]
+    fn order(&self) -> usize {
+        self.inner.order()
+    }
+
+    /// Largest eigenvalue modulus of A.
+    #[getter]
+    fn spectral_radius(&self) -> PyResult<f64> {
+        match self.inner.diagnostics.spectral_radius {
+            Some(r) => Ok(r),
+            None => self.inner.spectral_radius().map_err(to_py),
+        }
+    }
+
+    /// Fit diagnostics as a dict (singular values, NMAE, search choice, control check …).
+    #[getter]
+    fn diagnostics<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_py_object(py, &self.inner.diagnostics)
+    }
+
+    /// A copy with `items` added to (or replacing entries of) the diagnostics.
+    fn with_diagnostics(&self, py: Python<'_>, items: &Bound<'_, PyDict>) -> PyResult<Self> {
+        let extra: serde_json::Map<String, serde_json::Value> = from_py(items, "diagnostics")?;
+        let mut d =
+            serde_json::to_value(&self.inner.diagnostics).map_err(|e| data_err(e.to_string()))?;
+        if let serde_json::Value::Object(map) = &mut d {
+            map.extend(extra);
+        }
+        let mut model = (*self.inner).clone();
+        model.diagnostics = serde_json::from_value(d)
+            .map_err(|e| raise(Category::Config, format!("diagnostics: {e}")))?;
+        Self::wrap(py, model)
+    }
+
+    /// A copy with a linear vehicle drag of `k` [1/s] on each horizontal velocity.
+    fn with_velocity_drag(&self, py: Python<'_>, k: f64) -> PyResult<Self> {
+        let model = self.inner.with_velocity_drag(k).map_err(to_py)?;
+        Self::wrap(py, model)
+    }
+
+    /// Roll the model on from `history` (the last q state rows, oldest first, (q, n)) under
+    /// future `inputs` (H, m); returns the predicted (H, n) states x_{k+1..k+H}.
+    fn predict<'py>(
+        &self,
+        py: Python<'py>,
+        history: &Bound<'py, PyAny>,
+        inputs: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let model = &self.inner;
+        let (h, u) = (array2(history, "history")?, array2(inputs, "inputs")?);
+        if h.shape()[0] != model.delays || cols(&h) != model.n() {
+            return Err(data_err(format!(
+                "history must have shape ({}, {}), not {:?}",
+                model.delays,
+                model.n(),
+                h.shape()
+            )));
+        }
+        if cols(&u) != model.m() {
+            return Err(data_err(format!("inputs must have {} columns", model.m())));
+        }
+        let out = model.predict(h.as_slice()?, u.as_slice()?).map_err(to_py)?;
+        let rows = out.len() / model.n().max(1);
+        PyArray1::from_vec(py, out).reshape([rows, model.n()])
+    }
+
+    fn __repr__(&self) -> String {
+        let m = &self.inner;
+        let score = m
+            .diagnostics
+            .test_nmae
+            .map(|v| format!(", test NMAE {v:.4}"))
+            .unwrap_or_default();
+        format!(
+            "LinearModel({}, q={}, p={}, states={:?}, inputs={:?}, dt={}{score})",
+            m.method, m.delays, m.rank, m.states, m.inputs, m.dt
+        )
+    }
+
+    fn __eq__(&self, other: &Bound<'_, PyAny>) -> bool {
+        match other.cast::<PyLinearModel>() {
+            Ok(o) => *self.inner == *o.get().inner,
+            Err(_) => false,
+        }
+    }
+
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, (String,))> {
+        let text = slf.get().inner.to_json().map_err(to_py)?;
+        let ctor = slf.get_type().getattr("from_json")?;
+        Ok((ctor, (text,)))
+    }
 }
 
-/// Held-out rollout NMAE of a model on (x, u): returns (per-state list, mean).
+/// The outcome of a (q, p) search: every scored candidate and the selected model.
+#[pyclass(name = "Search", module = "swingrt._core", frozen)]
+pub struct PySearch {
+    inner: Arc<SearchResult>,
+    states: Vec<String>,
+}
+
+#[pymethods]
+impl PySearch {
+    /// Every candidate as a dict: delays, rank, nmae, per_state, stable, spectral_radius.
+    fn table<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        let rows = PyList::empty(py);
+        for c in &self.inner.table {
+            let mut row = candidate_row(c, &self.states);
+            if !c.nmae.is_finite() {
+                row["nmae"] = serde_json::Value::Null;
+            }
+            let obj = to_py_object(py, &row)?;
+            if !c.nmae.is_finite() {
+                obj.set_item("nmae", c.nmae)?;
+            }
+            rows.append(obj)?;
+        }
+        Ok(rows)
+    }
+
+    /// Index of the selected candidate in the table.
+    #[getter]
+    fn best(&self) -> usize {
+        self.inner.best
+    }
+}
+
+/// Borrowed (x, u) of a flight with their names.
+struct Columns<'py> {
+    x: numpy::PyReadonlyArray2<'py, f64>,
+    u: numpy::PyReadonlyArray2<'py, f64>,
+}
+
+impl<'py> Columns<'py> {
+    fn new(
+        x: &Bound<'py, PyAny>,
+        u: &Bound<'py, PyAny>,
+        states: &[String],
+        inputs: &[String],
+    ) -> PyResult<Self> {
+        let (x, u) = (array2(x, "x")?, array2(u, "u")?);
+        if cols(&x) != states.len() || cols(&u) != inputs.len() {
+            return Err(data_err(format!(
+                "x has {} columns for {} state names, u {} for {} input names",
+                cols(&x),
+                states.len(),
+                cols(&u),
+                inputs.len()
+            )));
+        }
+        Ok(Self { x, u })
+    }
+
+    fn trajectory(&self) -> PyResult<Trajectory<'_>> {
+        Trajectory::new(
+            self.x.as_slice()?,
+            cols(&self.x),
+            self.u.as_slice()?,
+            cols(&self.u),
+        )
+        .map_err(to_py)
+    }
+}
+
+/// The identification settings with every default filled in, validated (`ConfigError`
+/// naming the field).
 #[pyfunction]
-#[pyo3(signature = (model_json, x, u, *, horizon, starts=10))]
-fn sysid_evaluate(
+#[pyo3(signature = (settings=None))]
+fn identify_settings<'py>(
+    py: Python<'py>,
+    settings: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let s: IdentifySettings = crate::convert::settings(settings, "")?;
+    s.validate().map_err(to_py)?;
+    to_py_object(py, &s)
+}
+
+/// Identify a model from resampled columns `x` (N, n) named `states` and `u` (N, m) named
+/// `inputs`: fit, search or white-box per `settings`. Returns (model, search or None).
+#[pyfunction]
+#[pyo3(signature = (x, u, states, inputs, settings=None, *, payload_mass=None))]
+fn identify<'py>(
+    py: Python<'py>,
+    x: &Bound<'py, PyAny>,
+    u: &Bound<'py, PyAny>,
+    states: Vec<String>,
+    inputs: Vec<String>,
+    settings: Option<&Bound<'py, PyAny>>,
+    payload_mass: Option<f64>,
+) -> PyResult<(PyLinearModel, Option<PySearch>)> {
+    let s: IdentifySettings = crate::convert::settings(settings, "")?;
+    let data = Columns::new(x, u, &states, &inputs)?;
+    let traj = data.trajectory()?;
+    let out = py
+        .detach(|| pipeline::identify(&traj, &states, &inputs, &s, payload_mass))
+        .map_err(to_py)?;
+    let search = out.search.map(|r| PySearch {
+        inner: Arc::new(r),
+        states: states.clone(),
+    });
+    Ok((PyLinearModel::wrap(py, out.model)?, search))
+}
+
+/// Control-relevant selection (see `swing_core::control::selection`): from `search` (run on
+/// `x`, `u` with `settings`), the model whose MPC (`mpc` settings) flies the white-box
+/// `plant` within bounds. Returns (model, passed).
+#[pyfunction]
+#[pyo3(signature = (x, u, states, inputs, settings, search, plant, mpc=None, selection=None))]
+#[allow(clippy::too_many_arguments)]
+fn select_for_control<'py>(
+    py: Python<'py>,
+    x: &Bound<'py, PyAny>,
+    u: &Bound<'py, PyAny>,
+    states: Vec<String>,
+    inputs: Vec<String>,
+    settings: Option<&Bound<'py, PyAny>>,
+    search: &PySearch,
+    plant: &PyLinearModel,
+    mpc: Option<&Bound<'py, PyAny>>,
+    selection: Option<&Bound<'py, PyAny>>,
+) -> PyResult<(PyLinearModel, bool)> {
+    let s: IdentifySettings = crate::convert::settings(settings, "")?;
+    s.validate().map_err(to_py)?;
+    let mpc: MpcSettings = crate::convert::settings(mpc, "mpc")?;
+    let sel: SelectionSettings = crate::convert::settings(selection, "")?;
+    let data = Columns::new(x, u, &states, &inputs)?;
+    let traj = data.trajectory()?;
+    let (train, test) = pipeline::split(&traj, &s).map_err(to_py)?;
+    let result = search.inner.clone();
+    let plant = plant.inner.clone();
+    let picked = py
+        .detach(|| {
+            selection::select_for_control(
+                &train, &test, &states, &inputs, &s, &result, &plant, &mpc, &sel,
+            )
+        })
+        .map_err(to_py)?;
+    Ok((PyLinearModel::wrap(py, picked.model)?, picked.passed))
+}
+
+/// Held-out rollout NMAE of `model` on (x, u): returns (per-state list, mean).
+#[pyfunction]
+#[pyo3(signature = (model, x, u, *, rollout, starts=10))]
+fn evaluate(
     py: Python<'_>,
-    model_json: &str,
+    model: &PyLinearModel,
     x: &Bound<'_, PyAny>,
     u: &Bound<'_, PyAny>,
-    horizon: usize,
+    rollout: usize,
     starts: usize,
 ) -> PyResult<(Vec<f64>, f64)> {
-    let model = model_from(model_json)?;
-    let (xa, ua) = (array2(x, "x")?, array2(u, "u")?);
-    let (n, m) = (cols(&xa), cols(&ua));
-    let (xs, us) = (xa.as_slice()?, ua.as_slice()?);
+    let model = model.inner.clone();
+    let data = Columns::new(x, u, &model.states, &model.inputs)?;
+    let traj = data.trajectory()?;
     let nm = py
-        .detach(|| {
-            let traj = Trajectory::new(xs, n, us, m)?;
-            rollout_nmae(&model, &traj, horizon, starts)
-        })
+        .detach(|| rollout_nmae(&model, &traj, rollout, starts))
         .map_err(to_py)?;
     Ok((nm.per_state, nm.mean))
 }
 
-/// Predict H state rows from `history` (q, n) and future `inputs` (H, m); returns (H·n,).
+/// Payload mass [kg] by RLS on hover thrust (thesis 4.3.2) from columns on a uniform grid
+/// of `dt`; `skip` samples at the start are left out.
 #[pyfunction]
-fn sysid_predict<'py>(
-    py: Python<'py>,
-    model_json: &str,
-    history: &Bound<'py, PyAny>,
-    inputs: &Bound<'py, PyAny>,
-) -> PyResult<Bound<'py, PyArray1<f64>>> {
-    let model = model_from(model_json)?;
-    let (h, u) = (array2(history, "history")?, array2(inputs, "inputs")?);
-    if h.shape()[0] != model.delays || cols(&h) != model.n() {
-        return Err(data_err(format!(
-            "history must have shape ({}, {}), not {:?}",
-            model.delays,
-            model.n(),
-            h.shape()
-        )));
-    }
-    if cols(&u) != model.m() {
-        return Err(data_err(format!("inputs must have {} columns", model.m())));
-    }
-    let out = model.predict(h.as_slice()?, u.as_slice()?).map_err(to_py)?;
-    Ok(PyArray1::from_vec(py, out))
-}
-
-/// Validate model JSON; returns it normalised, with the spectral radius in diagnostics.
-#[pyfunction]
-fn sysid_check_model(model_json: &str) -> PyResult<(String, f64)> {
-    let mut model = model_from(model_json)?;
-    let rho = model.spectral_radius().map_err(to_py)?;
-    model.diagnostics.spectral_radius = Some(rho);
-    Ok((model.to_json().map_err(to_py)?, rho))
-}
-
-/// White-box model (eq. 5.7, stable sign, ZOH, exact q = 2 delay form) for `axes` axes.
-#[pyfunction]
-#[pyo3(signature = (states, inputs, *, payload_mass, length, vehicle_mass=0.952, friction=0.0,
-    gravity=9.81, dt=0.03, frequency_hz=None, x=None, u=None, offset="none"))]
+#[pyo3(signature = (thrust, vd, roll=None, pitch=None, *, dt, skip=0, vehicle_mass, forgetting=1.0))]
 #[allow(clippy::too_many_arguments)]
-fn sysid_whitebox(
-    states: Vec<String>,
-    inputs: Vec<String>,
-    payload_mass: f64,
-    length: f64,
-    vehicle_mass: f64,
-    friction: f64,
-    gravity: f64,
+fn whitebox_payload_mass(
+    thrust: &Bound<'_, PyAny>,
+    vd: &Bound<'_, PyAny>,
+    roll: Option<&Bound<'_, PyAny>>,
+    pitch: Option<&Bound<'_, PyAny>>,
     dt: f64,
-    frequency_hz: Option<f64>,
-    x: Option<&Bound<'_, PyAny>>,
-    u: Option<&Bound<'_, PyAny>>,
-    offset: &str,
-) -> PyResult<String> {
-    let params = WhiteboxParams {
-        vehicle_mass,
-        payload_mass,
-        length,
-        friction,
-        gravity,
+    skip: usize,
+    vehicle_mass: f64,
+    forgetting: f64,
+) -> PyResult<f64> {
+    let thrust = array1(thrust, "thrust")?;
+    let vd = array1(vd, "vd")?;
+    let roll = roll.map(|r| array1(r, "roll")).transpose()?;
+    let pitch = pitch.map(|p| array1(p, "pitch")).transpose()?;
+    let log = ThrustLog {
+        thrust: thrust.as_slice()?,
+        vd: vd.as_slice()?,
+        roll: roll.as_ref().map(|r| r.as_slice()).transpose()?,
+        pitch: pitch.as_ref().map(|p| p.as_slice()).transpose()?,
+        dt,
     };
-    let axes = inputs.len();
-    let model = whitebox::model(&params, axes, dt, frequency_hz).map_err(to_py)?;
-    let mut model = named(model, states, inputs)?;
-    let offset = parse_offset(offset)?;
-    if let (Some(x), Some(u)) = (x, u) {
-        let (xa, ua) = (array2(x, "x")?, array2(u, "u")?);
-        let traj =
-            Trajectory::new(xa.as_slice()?, cols(&xa), ua.as_slice()?, cols(&ua)).map_err(to_py)?;
-        whitebox::apply_offset(&mut model, &traj, offset).map_err(to_py)?;
-    } else if offset != Offset::None {
-        return Err(raise(
-            Category::Config,
-            "offset mean/affine needs training data x, u",
-        ));
-    }
-    model.to_json().map_err(to_py)
+    pipeline::payload_mass_from_thrust(&log, skip, vehicle_mass, forgetting).map_err(to_py)
 }
 
 /// Dominant frequency [Hz] of `signal` in [f_min, f_max] (FFT peak, thesis 4.3.3).
@@ -329,7 +483,7 @@ fn sysid_cable_length(freq_hz: f64, vehicle_mass: f64, payload_mass: f64, gravit
 
 /// RLS total-mass estimates after each sample from vertical thrust and down acceleration.
 #[pyfunction]
-#[pyo3(signature = (thrust_vertical, acc_down, *, gravity=9.81, forgetting=1.0, initial=1.0))]
+#[pyo3(signature = (thrust_vertical, acc_down, *, gravity, forgetting=1.0, initial=1.0))]
 fn sysid_rls_mass<'py>(
     py: Python<'py>,
     thrust_vertical: &Bound<'py, PyAny>,
@@ -373,12 +527,13 @@ fn sysid_smooth_gaussian<'py>(
 
 /// Register this domain's functions and classes on the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(sysid_fit, m)?)?;
-    m.add_function(wrap_pyfunction!(sysid_search, m)?)?;
-    m.add_function(wrap_pyfunction!(sysid_evaluate, m)?)?;
-    m.add_function(wrap_pyfunction!(sysid_predict, m)?)?;
-    m.add_function(wrap_pyfunction!(sysid_check_model, m)?)?;
-    m.add_function(wrap_pyfunction!(sysid_whitebox, m)?)?;
+    m.add_class::<PyLinearModel>()?;
+    m.add_class::<PySearch>()?;
+    m.add_function(wrap_pyfunction!(identify_settings, m)?)?;
+    m.add_function(wrap_pyfunction!(identify, m)?)?;
+    m.add_function(wrap_pyfunction!(select_for_control, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluate, m)?)?;
+    m.add_function(wrap_pyfunction!(whitebox_payload_mass, m)?)?;
     m.add_function(wrap_pyfunction!(sysid_fft_peak, m)?)?;
     m.add_function(wrap_pyfunction!(sysid_cable_length, m)?)?;
     m.add_function(wrap_pyfunction!(sysid_rls_mass, m)?)?;

@@ -13,6 +13,7 @@ use crate::error::{Categorized, Category};
 pub mod check;
 pub mod lqr;
 pub mod mpc;
+pub mod selection;
 
 pub use check::{mpc_step_check, step_check_with, StepCheck, StepCheckSettings};
 pub use lqr::{care, dare, LqrController, LqrSettings, PendulumParams, RiccatiSolution};
@@ -57,6 +58,9 @@ pub enum ControlError {
     /// The model does not fit the controller (dimensions, missing states, unstable …).
     #[error("model: {0}")]
     Model(String),
+    /// An identification step of a control routine failed (e.g. a refit in selection).
+    #[error(transparent)]
+    Sysid(#[from] crate::sysid::SysidError),
     /// A Riccati equation or other synthesis step has no (stabilising) solution.
     #[error("synthesis failed: {0}")]
     Synthesis(String),
@@ -73,9 +77,18 @@ impl Categorized for ControlError {
         match self {
             ControlError::Config(_) => Category::Config,
             ControlError::Model(_) => Category::Model,
+            ControlError::Sysid(e) => e.category(),
             ControlError::Synthesis(_) => Category::Control,
             ControlError::Solver(_) => Category::Solver,
             ControlError::Input(_) => Category::Data,
+        }
+    }
+
+    fn field(&self) -> Option<&str> {
+        match self {
+            ControlError::Config(e) => Some(&e.field),
+            ControlError::Sysid(e) => e.field(),
+            _ => None,
         }
     }
 }

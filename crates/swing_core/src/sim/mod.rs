@@ -7,3 +7,13 @@ pub mod trace;
 pub use runner::{SimError, Simulator};
 pub use scenario::{NoiseParams, RandomSteps, Scenario, SetpointEntry};
 pub use trace::Trace;
+
+/// Simulated seconds per wall second of the full loop of `scenario` over `seconds` of
+/// simulated flight on the calling thread.
+pub fn real_time_factor(mut scenario: Scenario, seconds: f64) -> Result<f64, SimError> {
+    scenario.duration = seconds;
+    let mut sim = Simulator::new(scenario)?;
+    let t0 = std::time::Instant::now();
+    sim.run_to_end()?;
+    Ok(seconds / t0.elapsed().as_secs_f64())
+}

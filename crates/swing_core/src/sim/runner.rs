@@ -45,6 +45,13 @@ impl Categorized for SimError {
             SimError::Diverged { .. } => Category::Simulation,
         }
     }
+
+    fn field(&self) -> Option<&str> {
+        match self {
+            SimError::Config(e) => Some(&e.field),
+            SimError::Diverged { .. } => None,
+        }
+    }
 }
 
 /// Timing statistics of the swing controller's ticks (wall clock; not part of the trace).

@@ -307,21 +307,69 @@ impl Scenario {
         }
     }
 
-    /// Parse TOML text; unknown keys and bad values give a [`ConfigError`] naming the field.
-    pub fn from_toml(text: &str) -> Result<Self, ConfigError> {
-        let de = toml::de::Deserializer::parse(text)
-            .map_err(|e| ConfigError::new("", one_line(&e.to_string())))?;
-        let sc: Scenario = serde_path_to_error::deserialize(de).map_err(path_error)?;
+    /// A built-in scenario by name: `step` (simulate), `training` (collect) or `hover` (the
+    /// step scenario without a schedule, an hour long: hold the start position).
+    pub fn builtin(name: &str) -> Result<Self, ConfigError> {
+        match name {
+            "step" => Ok(Self::default_step()),
+            "training" => Ok(Self::default_training()),
+            "hover" => Ok(Self {
+                name: "hover".into(),
+                setpoints: Vec::new(),
+                duration: 3600.0,
+                ..Self::default_step()
+            }),
+            other => Err(ConfigError::new(
+                "scenario",
+                format!("unknown built-in scenario {other:?} (use step, training or hover)"),
+            )),
+        }
+    }
+
+    /// This scenario with `over` merged in key by key (tables merge, anything else replaces),
+    /// parsed and validated; errors name the dotted field.
+    pub fn with_overrides(&self, over: toml::Table) -> Result<Self, ConfigError> {
+        let mut base = match toml::Value::try_from(self) {
+            Ok(toml::Value::Table(t)) => t,
+            _ => {
+                return Err(ConfigError::new(
+                    "scenario",
+                    "cannot be represented as TOML",
+                ))
+            }
+        };
+        crate::config::merge_tables(&mut base, over);
+        let sc: Scenario = crate::config::from_toml_value(toml::Value::Table(base))?;
         sc.validate()?;
         Ok(sc)
     }
 
-    /// Parse JSON text (the Python side passes dicts this way); same rules as TOML.
-    pub fn from_json(text: &str) -> Result<Self, ConfigError> {
-        let mut de = serde_json::Deserializer::from_str(text);
-        let sc: Scenario = serde_path_to_error::deserialize(&mut de).map_err(path_error)?;
+    /// Parse TOML text over the built-in scenario `base` (see [`Scenario::builtin`]).
+    pub fn from_toml_over(text: &str, base: &str) -> Result<Self, ConfigError> {
+        Self::builtin(base)?.with_overrides(crate::config::parse_toml(text)?)
+    }
+
+    /// Parse TOML text; unknown keys and bad values give a [`ConfigError`] naming the field.
+    pub fn from_toml(text: &str) -> Result<Self, ConfigError> {
+        let table = crate::config::parse_toml(text)?;
+        let sc: Scenario = crate::config::from_toml_value(toml::Value::Table(table))?;
         sc.validate()?;
         Ok(sc)
+    }
+
+    /// Parse JSON text (model files and pickles carry scenarios this way); same rules as TOML.
+    pub fn from_json(text: &str) -> Result<Self, ConfigError> {
+        let sc: Scenario = crate::config::from_json_str(text)?;
+        sc.validate()?;
+        Ok(sc)
+    }
+
+    /// Normalised hover thrust PX4's estimator settles on for this vehicle and payload.
+    pub fn hover_thrust(&self) -> f64 {
+        crate::control::px4::Px4Cascade::hover_thrust_for(
+            &self.vehicle,
+            self.vehicle.mass + self.payload.total_mass(),
+        )
     }
 
     /// Check physical sense of every section; the error names the field by dotted path.
@@ -383,24 +431,6 @@ impl Scenario {
     pub fn to_toml(&self) -> String {
         toml::to_string(self).unwrap_or_default()
     }
-}
-
-fn one_line(s: &str) -> String {
-    s.split_whitespace().collect::<Vec<_>>().join(" ")
-}
-
-fn path_error<E: std::fmt::Display>(e: serde_path_to_error::Error<E>) -> ConfigError {
-    let path = e.path().to_string();
-    let path = if path == "." { String::new() } else { path };
-    let msg = one_line(&e.inner().to_string());
-    // toml/serde_json put the offending key in the message; drop their location suffixes.
-    let msg = msg
-        .split(" at line ")
-        .next()
-        .unwrap_or(&msg)
-        .trim_start_matches("TOML parse error ")
-        .to_string();
-    ConfigError::new(path, msg)
 }
 
 #[cfg(test)]

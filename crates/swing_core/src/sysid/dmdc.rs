@@ -66,10 +66,10 @@ pub struct DmdcSettings {
 impl Default for DmdcSettings {
     fn default() -> Self {
         Self {
-            delays: 10,
+            delays: super::settings::DEFAULT_DELAYS,
             rank: None,
             offset: Offset::Affine,
-            dt: 0.03,
+            dt: super::settings::DEFAULT_DT,
         }
     }
 }

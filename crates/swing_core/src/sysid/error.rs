@@ -2,6 +2,7 @@
 
 use thiserror::Error;
 
+use crate::config::ConfigError;
 use crate::error::{Categorized, Category};
 
 /// Everything that can go wrong while identifying, evaluating or loading a model.
@@ -10,9 +11,9 @@ pub enum SysidError {
     /// Unusable data: wrong shape, non-finite values, too short for the chosen delays.
     #[error("data: {0}")]
     Data(String),
-    /// Invalid settings (delays, rank, horizon, offset …).
-    #[error("settings: {0}")]
-    Config(String),
+    /// Invalid settings (delays, rank, horizon, offset …); names the field.
+    #[error("{0}")]
+    Config(#[from] ConfigError),
     /// Identification failed on valid input (e.g. no stable candidate in a search).
     #[error("identification: {0}")]
     Identification(String),
@@ -30,6 +31,13 @@ impl Categorized for SysidError {
             SysidError::Model(_) => Category::Model,
         }
     }
+
+    fn field(&self) -> Option<&str> {
+        match self {
+            SysidError::Config(e) => Some(&e.field),
+            _ => None,
+        }
+    }
 }
 
 /// Shorthand for a data error.
@@ -39,7 +47,7 @@ pub(crate) fn data(msg: impl Into<String>) -> SysidError {
 
 /// Shorthand for a settings error.
 pub(crate) fn config(msg: impl Into<String>) -> SysidError {
-    SysidError::Config(msg.into())
+    SysidError::Config(ConfigError::new("settings", msg))
 }
 
 /// Shorthand for a model error.

@@ -10,7 +10,9 @@ pub mod hankel;
 pub mod havokc;
 pub mod metrics;
 pub mod model;
+pub mod pipeline;
 pub mod search;
+pub mod settings;
 pub mod smooth;
 pub mod whitebox;
 
@@ -18,3 +20,4 @@ pub use error::SysidError;
 pub use hankel::Trajectory;
 pub use metrics::Nmae;
 pub use model::{Diagnostics, LinearModel, Offset, WhiteboxEstimates};
+pub use settings::{IdentifyMethod, IdentifySettings, SelectBy};

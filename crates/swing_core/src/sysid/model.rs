@@ -41,6 +41,12 @@ impl Offset {
         }
     }
 
+    /// Constant regression columns the offset adds (1 for `affine`): the full rank of a
+    /// fit is n·q + m + this.
+    pub fn constant_columns(&self) -> usize {
+        usize::from(*self == Offset::Affine)
+    }
+
     /// The lowercase name.
     pub fn name(&self) -> &'static str {
         match self {
@@ -187,6 +193,26 @@ impl LinearModel {
     /// Dimension of the stacked state n·q.
     pub fn order(&self) -> usize {
         self.n() * self.delays
+    }
+
+    /// This model with a linear vehicle drag of `k` [1/s] on each horizontal velocity
+    /// (`vn`, `ve`): v⁺ −= k·dt·v in the newest frame. Identified and white-box models of a
+    /// hovering vehicle have none; the real one has about 0.12 /s at cruise speeds. The
+    /// fingerprint is cleared (no data were fitted to this model).
+    pub fn with_velocity_drag(&self, k: f64) -> Result<Self, SysidError> {
+        if !(k.is_finite() && k >= 0.0) {
+            return Err(super::error::config(format!(
+                "vehicle drag must be a finite number >= 0 1/s, not {k}"
+            )));
+        }
+        let mut out = self.clone();
+        for (i, name) in self.states.iter().enumerate() {
+            if name == "vn" || name == "ve" {
+                out.a[(i, i)] -= k * self.dt;
+            }
+        }
+        out.fingerprint.clear();
+        Ok(out)
     }
 
     /// Check dimensions, names, finiteness and the sample time; the error names the problem.

@@ -53,9 +53,6 @@ pub struct Grid {
     pub rank_start: usize,
     /// Rank step.
     pub rank_step: usize,
-    /// Largest rank as n·q + m + `rank_extra` (the full rank when `rank_extra` is the
-    /// affine constant count); ranks above the full rank are never tried.
-    pub rank_extra: usize,
     /// Only ranks within `rank_window` = (lo, hi) when given (fine stage).
     pub rank_window: Option<(usize, usize)>,
 }
@@ -67,14 +64,15 @@ impl Grid {
             delays: (2..=60).step_by(2).collect(),
             rank_start: 5,
             rank_step: 5,
-            rank_extra: 0,
             rank_window: None,
         }
     }
 
-    /// Ranks tried for q with n states, m inputs and full rank `full`.
-    pub fn ranks(&self, q: usize, n: usize, m: usize, full: usize) -> Vec<usize> {
-        let top = (n * q + m + self.rank_extra).min(full);
+    /// Ranks tried for q with n states, m inputs, `constants` constant regression columns
+    /// (see [`Offset::constant_columns`]) and numerical full rank `full`; ranks above the
+    /// full rank n·q + m + constants are never tried.
+    pub fn ranks(&self, q: usize, n: usize, m: usize, constants: usize, full: usize) -> Vec<usize> {
+        let top = (n * q + m + constants).min(full);
         let (lo, hi) = self.rank_window.unwrap_or((1, usize::MAX));
         (self.rank_start.max(1)..=top)
             .step_by(self.rank_step.max(1))
@@ -105,7 +103,7 @@ impl Default for SearchSettings {
         Self {
             method: Method::Dmdc,
             offset: Offset::Affine,
-            dt: 0.03,
+            dt: super::settings::DEFAULT_DT,
             horizon: 667,
             starts: 10,
             stability_tolerance: 1e-3,
@@ -203,7 +201,7 @@ pub fn grid_search(
             (None, Source::Havokc(s)) => s.input_mean().to_vec(),
             _ => unreachable!(),
         };
-        let ranks = grid.ranks(q, n, m, full);
+        let ranks = grid.ranks(q, n, m, settings.offset.constant_columns(), full);
         let first = table.len();
         let mut g = faer::Mat::<f64>::zeros(n, full);
         let mut prev = 0;
@@ -327,7 +325,6 @@ pub fn coarse_to_fine(
         delays: (q0.saturating_sub(q_radius).max(1)..=q_hi.min(q0 + q_radius)).collect(),
         rank_start: 1,
         rank_step: 1,
-        rank_extra: coarse.rank_extra,
         rank_window: Some((p0.saturating_sub(p_radius).max(1), p0 + p_radius)),
     };
     let second = grid_search(train, test, &fine, settings)?;

@@ -1,0 +1,279 @@
+//! Control-relevant model selection: from a search's candidates, the model to fly an MPC on.
+//!
+//! Rollout NMAE alone is a poor guide (see `check`): models within a few percent of the best
+//! can carry spurious slow modes that the MPC's feedback excites. The `candidates` stable
+//! (q, p) of lowest held-out NMAE are refitted and, best first, the MPC designed on each flies
+//! the white-box model of the same flight in closed loop — as identified, and with each of
+//! `vehicle_drag` added — behind each of `input_lags`: hover, a step, hold. The first whose
+//! every run stays within `bounds` is selected; with none passing, the one that misses its
+//! bounds least (largest ratio to a bound), and its diagnostics say so.
+
+use serde::{Deserialize, Serialize};
+use serde_json::json;
+
+use crate::config::{finite, non_negative, ConfigError};
+use crate::control::check::{step_check_with, StepCheck, StepCheckSettings};
+use crate::control::{ControlError, MpcController, MpcSettings};
+use crate::sysid::pipeline::{self, candidate_row};
+use crate::sysid::search::SearchResult;
+use crate::sysid::{IdentifySettings, LinearModel, Trajectory};
+
+/// Bounds of the closed-loop check, as fractions of the step.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CheckBounds {
+    /// Largest overshoot beyond the new setpoint.
+    pub overshoot: f64,
+    /// Largest |v − setpoint| at the end of the check.
+    pub final_error: f64,
+    /// Largest |v| while holding hover before the step.
+    pub hold_drift: f64,
+}
+
+impl Default for CheckBounds {
+    fn default() -> Self {
+        Self {
+            overshoot: 0.35,
+            final_error: 0.03,
+            hold_drift: 0.1,
+        }
+    }
+}
+
+impl CheckBounds {
+    /// Whether a check's every figure is within its bound.
+    pub fn admit(&self, c: &StepCheck) -> bool {
+        c.passes(self.overshoot, self.final_error, self.hold_drift)
+    }
+
+    /// How far a check misses its bounds: the largest ratio of a figure to its bound.
+    pub fn miss(&self, c: &StepCheck) -> f64 {
+        (c.overshoot / self.overshoot)
+            .max(c.final_error / self.final_error)
+            .max(c.hold_drift / self.hold_drift)
+    }
+}
+
+/// Settings of [`select_for_control`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SelectionSettings {
+    /// How many of the lowest-NMAE stable candidates are flown at most.
+    pub candidates: usize,
+    /// Time constants of a first-order lag between controller and plant [s] (0 = none).
+    pub input_lags: Vec<f64>,
+    /// Linear vehicle drags added to the white-box plant as extra plants [1/s].
+    pub vehicle_drag: Vec<f64>,
+    /// Velocity step of the check [m/s].
+    pub step: f64,
+    /// Pass bounds (fractions of the step).
+    pub bounds: CheckBounds,
+}
+
+impl Default for SelectionSettings {
+    fn default() -> Self {
+        Self {
+            candidates: 20,
+            input_lags: vec![0.0, 0.1],
+            vehicle_drag: vec![0.12],
+            step: 2.0,
+            bounds: CheckBounds::default(),
+        }
+    }
+}
+
+impl SelectionSettings {
+    /// Check every field; the error names the first bad one.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if self.candidates == 0 {
+            return Err(ConfigError::new("candidates", "must be at least 1"));
+        }
+        if self.input_lags.is_empty() {
+            return Err(ConfigError::new(
+                "input_lags",
+                "needs at least one lag (0 = none)",
+            ));
+        }
+        for (i, l) in self.input_lags.iter().enumerate() {
+            non_negative(&format!("input_lags[{i}]"), *l)?;
+        }
+        for (i, k) in self.vehicle_drag.iter().enumerate() {
+            non_negative(&format!("vehicle_drag[{i}]"), *k)?;
+        }
+        finite("step", self.step)?;
+        if self.step == 0.0 {
+            return Err(ConfigError::new("step", "must be non-zero"));
+        }
+        for (name, v) in [
+            ("overshoot", self.bounds.overshoot),
+            ("final_error", self.bounds.final_error),
+            ("hold_drift", self.bounds.hold_drift),
+        ] {
+            finite(&format!("bounds.{name}"), v)?;
+        }
+        Ok(())
+    }
+}
+
+/// One candidate flown in the check.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CheckedCandidate {
+    /// Delays q.
+    pub delays: usize,
+    /// Rank p.
+    pub rank: usize,
+    /// Held-out NMAE from the search.
+    pub nmae: f64,
+    /// Whether every run was within the bounds.
+    pub passed: bool,
+    /// Worst figures over every plant and lag.
+    pub worst: StepCheck,
+}
+
+/// Outcome of [`select_for_control`].
+#[derive(Clone, Debug)]
+pub struct Selection {
+    /// The model to fly, with `selected` and `control_check` in its diagnostics.
+    pub model: LinearModel,
+    /// Whether it passed the check (false: the least violating candidate).
+    pub passed: bool,
+    /// Every candidate flown, in the order flown.
+    pub checked: Vec<CheckedCandidate>,
+}
+
+/// Worst figures of an MPC designed on `model` over every plant and input lag.
+fn worst_check(
+    model: &LinearModel,
+    mpc_settings: &MpcSettings,
+    plants: &[LinearModel],
+    settings: &SelectionSettings,
+) -> Result<StepCheck, ControlError> {
+    let mut mpc = MpcController::new(model, mpc_settings.clone())?;
+    let mut worst = StepCheck {
+        overshoot: f64::NEG_INFINITY,
+        final_error: f64::NEG_INFINITY,
+        hold_drift: f64::NEG_INFINITY,
+    };
+    for plant in plants {
+        for &input_lag in &settings.input_lags {
+            let check = StepCheckSettings {
+                step: settings.step,
+                input_lag,
+                ..StepCheckSettings::default()
+            };
+            let r = step_check_with(&mut mpc, model, plant, &check)?;
+            worst.overshoot = worst.overshoot.max(r.overshoot);
+            worst.final_error = worst.final_error.max(r.final_error);
+            worst.hold_drift = worst.hold_drift.max(r.hold_drift);
+        }
+    }
+    Ok(worst)
+}
+
+/// Pick from `search` (run on `train`/`test` with `identify`) the model to fly an MPC with
+/// `mpc_settings` on, checking each candidate against the white-box `plant` of the flight.
+#[allow(clippy::too_many_arguments)]
+pub fn select_for_control(
+    train: &Trajectory<'_>,
+    test: &Trajectory<'_>,
+    states: &[String],
+    inputs: &[String],
+    identify: &IdentifySettings,
+    search: &SearchResult,
+    plant: &LinearModel,
+    mpc_settings: &MpcSettings,
+    settings: &SelectionSettings,
+) -> Result<Selection, ControlError> {
+    settings.validate()?;
+    mpc_settings.validate()?;
+    let mut plants = vec![plant.clone()];
+    for &k in &settings.vehicle_drag {
+        plants.push(plant.with_velocity_drag(k)?);
+    }
+    let best = &search.table[search.best];
+    let refit = |q: usize, p: usize| -> Result<LinearModel, ControlError> {
+        if (q, p) == (best.delays, best.rank) {
+            let mut m = pipeline::named(search.model.clone(), states, inputs)?;
+            m.diagnostics.test_nmae = search.model.diagnostics.test_nmae;
+            return Ok(m);
+        }
+        let mut m = pipeline::named(pipeline::fit(train, identify, q, Some(p))?, states, inputs)?;
+        pipeline::score(&mut m, test, identify)?;
+        Ok(m)
+    };
+    let mut rows: Vec<_> = search
+        .table
+        .iter()
+        .filter(|c| c.stable == Some(true))
+        .collect();
+    rows.sort_by(|a, b| a.nmae.total_cmp(&b.nmae));
+    rows.truncate(settings.candidates);
+    let mut checked = Vec::new();
+    let mut chosen = None;
+    for row in rows {
+        let model = refit(row.delays, row.rank)?;
+        let worst = worst_check(&model, mpc_settings, &plants, settings)?;
+        let passed = settings.bounds.admit(&worst);
+        checked.push(CheckedCandidate {
+            delays: row.delays,
+            rank: row.rank,
+            nmae: row.nmae,
+            passed,
+            worst,
+        });
+        if passed {
+            chosen = Some(model);
+            break;
+        }
+    }
+    let passed = chosen.is_some();
+    let mut model = match chosen {
+        Some(m) => m,
+        None => {
+            let least = checked
+                .iter()
+                .min_by(|a, b| {
+                    settings
+                        .bounds
+                        .miss(&a.worst)
+                        .total_cmp(&settings.bounds.miss(&b.worst))
+                })
+                .ok_or_else(|| {
+                    ControlError::Model("the search has no stable candidate to check".into())
+                })?;
+            refit(least.delays, least.rank)?
+        }
+    };
+    let selected = search
+        .table
+        .iter()
+        .find(|c| (c.delays, c.rank) == (model.delays, model.rank))
+        .unwrap_or(best);
+    let extra = &mut model.diagnostics.extra;
+    extra.insert("selected".into(), candidate_row(selected, states));
+    extra.insert(
+        "control_check".into(),
+        json!({
+            "plant": "whitebox",
+            "input_lags": settings.input_lags,
+            "vehicle_drag": settings.vehicle_drag,
+            "step": settings.step,
+            "bounds": settings.bounds,
+            "passed": passed,
+            "checked": checked.iter().map(|c| json!({
+                "delays": c.delays,
+                "rank": c.rank,
+                "nmae": c.nmae,
+                "passed": c.passed,
+                "overshoot": c.worst.overshoot,
+                "final_error": c.worst.final_error,
+                "hold_drift": c.worst.hold_drift,
+            })).collect::<Vec<_>>(),
+        }),
+    );
+    Ok(Selection {
+        model,
+        passed,
+        checked,
+    })
+}

@@ -1,0 +1,313 @@
+//! The identification pipeline on resampled columns (thesis 4.6.1–4.6.3): hold out the
+//! test span at the start of the flight, fit given (q, p) or search them, score the model's
+//! rollout NMAE on the held-out span; or build the white-box baseline (thesis 4.3).
+//!
+//! Callers resample and pick the columns (that is I/O); every rule from there on is here.
+
+use serde_json::{json, Value};
+
+use super::error::{data, SysidError};
+use super::hankel::Trajectory;
+use super::model::LinearModel;
+use super::search::{coarse_to_fine, grid_search, Candidate, SearchResult};
+use super::settings::{IdentifyMethod, IdentifySettings};
+use super::{dmdc, havokc, metrics, whitebox};
+
+/// A model and, when it came from a search, every scored candidate.
+#[derive(Clone, Debug)]
+pub struct Identified {
+    /// The identified model, with `states`/`inputs` named and its held-out NMAE in the
+    /// diagnostics.
+    pub model: LinearModel,
+    /// The search, when one ran.
+    pub search: Option<SearchResult>,
+}
+
+/// Split a flight into (training, test): the first `test_span` seconds are held out.
+pub fn split<'a>(
+    traj: &Trajectory<'a>,
+    settings: &IdentifySettings,
+) -> Result<(Trajectory<'a>, Trajectory<'a>), SysidError> {
+    let k = settings.test_samples();
+    if k >= traj.len {
+        return Err(data(format!(
+            "the data ({:.1} s) is not longer than the test span ({} s)",
+            traj.len as f64 * settings.dt,
+            settings.test_span
+        )));
+    }
+    Ok((traj.slice(k, traj.len), traj.slice(0, k)))
+}
+
+/// Fit the data-driven method of `settings` with `delays` and `rank` on `train`.
+pub fn fit(
+    train: &Trajectory<'_>,
+    settings: &IdentifySettings,
+    delays: usize,
+    rank: Option<usize>,
+) -> Result<LinearModel, SysidError> {
+    match settings.method {
+        IdentifyMethod::Dmdc => dmdc::fit(
+            train,
+            &dmdc::DmdcSettings {
+                delays,
+                rank,
+                offset: settings.offset,
+                dt: settings.dt,
+            },
+        ),
+        IdentifyMethod::Havokc => havokc::fit(
+            train,
+            &havokc::HavokcSettings {
+                delays,
+                rank,
+                offset: settings.offset,
+                dt: settings.dt,
+            },
+        ),
+        IdentifyMethod::Whitebox => Err(super::error::config(
+            "the white-box baseline has no delays or rank to fit",
+        )),
+    }
+}
+
+/// Score `model` on the held-out span, storing the NMAE in its diagnostics; a span too short
+/// for the rollout leaves the model unscored.
+pub fn score(
+    model: &mut LinearModel,
+    test: &Trajectory<'_>,
+    settings: &IdentifySettings,
+) -> Result<(), SysidError> {
+    if test.len == 0 {
+        return Ok(());
+    }
+    match metrics::rollout_nmae(model, test, settings.rollout_samples(), settings.starts) {
+        Ok(nm) => {
+            model.diagnostics.test_nmae = Some(nm.mean);
+            Ok(())
+        }
+        Err(SysidError::Data(_)) => Ok(()),
+        Err(e) => Err(e),
+    }
+}
+
+/// Name a fitted model's states and inputs.
+pub fn named(
+    mut model: LinearModel,
+    states: &[String],
+    inputs: &[String],
+) -> Result<LinearModel, SysidError> {
+    if states.len() != model.n() || inputs.len() != model.m() {
+        return Err(data(format!(
+            "{} state names and {} input names for {} states and {} inputs",
+            states.len(),
+            inputs.len(),
+            model.n(),
+            model.m()
+        )));
+    }
+    model.states = states.to_vec();
+    model.inputs = inputs.to_vec();
+    Ok(model)
+}
+
+/// A search candidate as a diagnostics row (`per_state` keyed by state name).
+pub fn candidate_row(c: &Candidate, states: &[String]) -> Value {
+    let per: serde_json::Map<String, Value> = states
+        .iter()
+        .zip(&c.per_state)
+        .map(|(s, v)| (s.clone(), json!(v)))
+        .collect();
+    json!({
+        "delays": c.delays,
+        "rank": c.rank,
+        "nmae": finite_or_null(c.nmae),
+        "per_state": per,
+        "stable": c.stable,
+        "spectral_radius": c.spectral_radius,
+    })
+}
+
+fn finite_or_null(v: f64) -> Value {
+    if v.is_finite() {
+        json!(v)
+    } else {
+        Value::Null
+    }
+}
+
+/// Run the search of `settings` (coarse grid, then the fine one when set).
+pub fn search(
+    train: &Trajectory<'_>,
+    test: &Trajectory<'_>,
+    settings: &IdentifySettings,
+) -> Result<SearchResult, SysidError> {
+    let scoring = settings
+        .search_settings()
+        .ok_or_else(|| super::error::config("search applies to dmdc and havokc, not whitebox"))?;
+    let grid = settings.coarse_grid();
+    match settings.fine {
+        Some([qr, pr]) => coarse_to_fine(train, test, &grid, qr, pr, &scoring),
+        None => grid_search(train, test, &grid, &scoring),
+    }
+}
+
+/// The white-box baseline on the training data: the payload mass is given (`payload_mass`,
+/// from the settings or an RLS estimate), the cable length from the settings or the FFT
+/// peak of the axis that swings most (eq. 4.8).
+pub fn whitebox_model(
+    train: &Trajectory<'_>,
+    states: &[String],
+    inputs: &[String],
+    settings: &IdentifySettings,
+    payload_mass: f64,
+) -> Result<LinearModel, SysidError> {
+    let axes = inputs.len();
+    if states.len() != 2 * axes {
+        return Err(data(format!(
+            "the white-box needs a velocity and a swing per input, got states {states:?}"
+        )));
+    }
+    let (length, freq) = match settings.cable_length {
+        Some(l) => (l, None),
+        None => {
+            let std = |j: usize| {
+                let col: Vec<f64> = (0..train.len).map(|k| train.state(k)[j]).collect();
+                let mean = col.iter().sum::<f64>() / col.len().max(1) as f64;
+                (col.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / col.len().max(1) as f64)
+                    .sqrt()
+            };
+            let j = (axes..2 * axes)
+                .max_by(|a, b| std(*a).total_cmp(&std(*b)))
+                .expect("at least one axis");
+            let swing: Vec<f64> = (0..train.len).map(|k| train.state(k)[j]).collect();
+            let [lo, hi] = settings.swing_band;
+            let f = whitebox::fft_peak_frequency(&swing, settings.dt, lo, hi)?;
+            let l = whitebox::cable_length(f, settings.vehicle_mass, payload_mass, GRAVITY);
+            (l, Some(f))
+        }
+    };
+    let params = whitebox::WhiteboxParams {
+        vehicle_mass: settings.vehicle_mass,
+        payload_mass,
+        length,
+        friction: settings.friction,
+        gravity: GRAVITY,
+    };
+    let model = whitebox::model(&params, axes, settings.dt, freq)?;
+    let mut model = named(model, states, inputs)?;
+    whitebox::apply_offset(&mut model, train, settings.offset)?;
+    Ok(model)
+}
+
+/// Gravity of the white-box (the plant's).
+const GRAVITY: f64 = 9.81;
+
+/// Identify a model from resampled (and, if asked, smoothed) columns: `traj` holds the
+/// states named `states` and the inputs named `inputs`. The white-box needs
+/// `payload_mass` when the settings give none.
+pub fn identify(
+    traj: &Trajectory<'_>,
+    states: &[String],
+    inputs: &[String],
+    settings: &IdentifySettings,
+    payload_mass: Option<f64>,
+) -> Result<Identified, SysidError> {
+    settings.validate()?;
+    let (train, test) = split(traj, settings)?;
+    let (mut model, search_result) = match settings.method {
+        IdentifyMethod::Whitebox => {
+            let mass = settings.payload_mass.or(payload_mass).ok_or_else(|| {
+                data("the white-box needs the payload mass (payload_mass) or a thrust column")
+            })?;
+            (
+                whitebox_model(&train, states, inputs, settings, mass)?,
+                None,
+            )
+        }
+        _ if settings.search => {
+            let res = search(&train, &test, settings)?;
+            let mut model = named(res.model.clone(), states, inputs)?;
+            model.diagnostics.extra.insert(
+                "selected".into(),
+                candidate_row(&res.table[res.best], states),
+            );
+            (model, Some(res))
+        }
+        _ => {
+            let model = fit(&train, settings, settings.fit_delays(), settings.rank)?;
+            (named(model, states, inputs)?, None)
+        }
+    };
+    if search_result.is_none() {
+        score(&mut model, &test, settings)?;
+    }
+    Ok(Identified {
+        model,
+        search: search_result,
+    })
+}
+
+/// Columns of a flight sampled on a uniform grid, for the payload-mass estimate.
+#[derive(Clone, Copy, Debug)]
+pub struct ThrustLog<'a> {
+    /// Total rotor thrust along body z [N].
+    pub thrust: &'a [f64],
+    /// Down velocity [m/s].
+    pub vd: &'a [f64],
+    /// Roll [rad], when logged (the thrust is projected on the vertical).
+    pub roll: Option<&'a [f64]>,
+    /// Pitch [rad], when logged.
+    pub pitch: Option<&'a [f64]>,
+    /// Sample time of the grid [s].
+    pub dt: f64,
+}
+
+/// Payload mass [kg] by RLS on hover thrust (section 4.3.2): the thrust projected on the
+/// vertical against g − a_down (a_down the central-difference derivative of `vd`), minus the
+/// known `vehicle_mass`; the first `skip` samples are left out.
+pub fn payload_mass_from_thrust(
+    log: &ThrustLog<'_>,
+    skip: usize,
+    vehicle_mass: f64,
+    forgetting: f64,
+) -> Result<f64, SysidError> {
+    let n = log.thrust.len();
+    let same = |c: Option<&[f64]>| c.is_none_or(|c| c.len() == n);
+    if log.vd.len() != n || !same(log.roll) || !same(log.pitch) {
+        return Err(data("thrust, vd, roll and pitch must have the same length"));
+    }
+    if n < 2 || skip + 2 > n {
+        return Err(data("too few samples for the payload-mass estimate"));
+    }
+    if !(log.dt.is_finite() && log.dt > 0.0) {
+        return Err(super::error::config(format!(
+            "dt must be positive, not {}",
+            log.dt
+        )));
+    }
+    let angle = |c: Option<&[f64]>, k: usize| c.map_or(1.0, |c| c[k].cos());
+    let vertical: Vec<f64> = (skip..n)
+        .map(|k| log.thrust[k] * angle(log.roll, k) * angle(log.pitch, k))
+        .collect();
+    let acc: Vec<f64> = (skip..n)
+        .map(|k| {
+            let v = log.vd;
+            if k == 0 {
+                (v[1] - v[0]) / log.dt
+            } else if k == n - 1 {
+                (v[n - 1] - v[n - 2]) / log.dt
+            } else {
+                (v[k + 1] - v[k - 1]) / (2.0 * log.dt)
+            }
+        })
+        .collect();
+    let est = whitebox::rls_mass(&vertical, &acc, GRAVITY, forgetting, vehicle_mass)?;
+    let mass = est.last().copied().unwrap_or(f64::NAN) - vehicle_mass;
+    if !(mass > 0.0) {
+        return Err(SysidError::Identification(format!(
+            "estimated payload mass {mass:.3} kg is not positive"
+        )));
+    }
+    Ok(mass)
+}

@@ -1,0 +1,270 @@
+//! Identification settings: the one home of their defaults and checks.
+//!
+//! `swingrt identify`, the `[identify]` section of an experiment and `swingrt.identify(...)`
+//! all read this struct (serde, unknown keys refused), so a default such as the sample time
+//! or the delay count is written once, and a typo names its field before anything flies.
+
+use serde::{Deserialize, Serialize};
+
+use super::model::Offset;
+use super::search::{Grid, Method, SearchSettings};
+use crate::config::{finite, non_negative, positive, ConfigError};
+
+/// Sample time of identification and of the MPC built on its models [s] (thesis 4.6.4).
+pub const DEFAULT_DT: f64 = 0.03;
+/// Delay count q of a fit without search.
+pub const DEFAULT_DELAYS: usize = 20;
+
+/// Which identification method to run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum IdentifyMethod {
+    /// DMDc with delay coordinates (eq. 4.9–4.15).
+    #[default]
+    Dmdc,
+    /// HAVOKc (eq. 4.16–4.23).
+    Havokc,
+    /// The white-box baseline (thesis 4.3): FFT cable length, RLS payload mass, eq. 5.7.
+    Whitebox,
+}
+
+impl IdentifyMethod {
+    /// The data-driven method a search runs, or `None` for the white-box.
+    pub fn data_driven(self) -> Option<Method> {
+        match self {
+            IdentifyMethod::Dmdc => Some(Method::Dmdc),
+            IdentifyMethod::Havokc => Some(Method::Havokc),
+            IdentifyMethod::Whitebox => None,
+        }
+    }
+
+    /// The model-file name.
+    pub fn name(self) -> &'static str {
+        match self {
+            IdentifyMethod::Dmdc => "dmdc",
+            IdentifyMethod::Havokc => "havokc",
+            IdentifyMethod::Whitebox => "whitebox",
+        }
+    }
+}
+
+/// How a search picks the model it returns.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SelectBy {
+    /// Lowest held-out NMAE among candidates whose MPC passes the closed-loop step check
+    /// (`control::selection`).
+    #[default]
+    Control,
+    /// Lowest held-out NMAE among stable candidates.
+    Nmae,
+}
+
+/// Settings of one identification (fit, search, white-box), with their defaults.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct IdentifySettings {
+    /// Method: `dmdc`, `havokc` or `whitebox`.
+    pub method: IdentifyMethod,
+    /// Offset handling of the input channel (thesis 4.6.6).
+    pub offset: Offset,
+    /// Delay count q of a fit (default [`DEFAULT_DELAYS`]); not with `search`.
+    pub delays: Option<usize>,
+    /// SVD truncation rank p of a fit (default: full rank); not with `search`.
+    pub rank: Option<usize>,
+    /// Search (q, p) on the held-out span instead of fitting given ones.
+    pub search: bool,
+    /// How a search chooses among its candidates.
+    pub select: SelectBy,
+    /// Sample time the data are resampled to [s].
+    pub dt: f64,
+    /// Held-out span at the start of the flight, used for scoring and selection [s].
+    pub test_span: f64,
+    /// Rollout length of the k-step NMAE [s] (20 s in the thesis).
+    #[serde(alias = "horizon")]
+    pub rollout: f64,
+    /// Number of rollout start points (10 in the thesis).
+    pub starts: usize,
+    /// Smooth states (quadratic regression) and inputs (Gaussian average) first (4.6.6).
+    pub smooth: bool,
+    /// Smoothing window [samples].
+    pub smooth_window: usize,
+    /// Delay counts of the search's coarse grid (default q = 2, 6, …, 58).
+    pub search_delays: Option<Vec<usize>>,
+    /// Smallest rank of the coarse grid.
+    pub rank_start: usize,
+    /// Rank step of the coarse grid.
+    pub rank_step: usize,
+    /// Unit-step refinement radius (q, p) around the coarse winner; `None` = grid only.
+    pub fine: Option<[usize; 2]>,
+    /// Spectral radius a candidate may have above 1 and still count as stable.
+    pub stability_tolerance: f64,
+    /// White-box: payload mass [kg]; `None` = RLS on hover thrust (needs a thrust column).
+    pub payload_mass: Option<f64>,
+    /// White-box: cable length [m]; `None` = from the FFT peak of the swing (eq. 4.8).
+    pub cable_length: Option<f64>,
+    /// White-box: vehicle mass m_Q [kg] (table 6.1).
+    pub vehicle_mass: f64,
+    /// White-box: joint friction c of eq. 5.7 [N·m·s/rad].
+    pub friction: f64,
+    /// White-box: band searched for the swing's FFT peak [Hz].
+    pub swing_band: [f64; 2],
+}
+
+impl Default for IdentifySettings {
+    fn default() -> Self {
+        Self {
+            method: IdentifyMethod::Dmdc,
+            offset: Offset::Affine,
+            delays: None,
+            rank: None,
+            search: false,
+            select: SelectBy::Control,
+            dt: DEFAULT_DT,
+            test_span: 40.0,
+            rollout: 20.0,
+            starts: 10,
+            smooth: false,
+            smooth_window: 20,
+            search_delays: None,
+            rank_start: 5,
+            rank_step: 5,
+            fine: Some([2, 4]),
+            stability_tolerance: 1e-3,
+            payload_mass: None,
+            cable_length: None,
+            vehicle_mass: crate::plant::params::VehicleParams::default().mass,
+            friction: 0.0,
+            swing_band: [0.1, 3.0],
+        }
+    }
+}
+
+impl IdentifySettings {
+    /// Check every field; the error names the first bad one.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        positive("dt", self.dt)?;
+        non_negative("test_span", self.test_span)?;
+        positive("rollout", self.rollout)?;
+        if self.starts == 0 {
+            return Err(ConfigError::new("starts", "must be at least 1"));
+        }
+        if self.delays == Some(0) {
+            return Err(ConfigError::new("delays", "must be a positive integer"));
+        }
+        if self.rank == Some(0) {
+            return Err(ConfigError::new("rank", "must be a positive integer"));
+        }
+        if self.search {
+            if self.method == IdentifyMethod::Whitebox {
+                return Err(ConfigError::new(
+                    "search",
+                    "applies to dmdc and havokc, not whitebox",
+                ));
+            }
+            if self.delays.is_some() || self.rank.is_some() {
+                return Err(ConfigError::new(
+                    "search",
+                    "give either search or delays/rank, not both",
+                ));
+            }
+            if self.test_span == 0.0 {
+                return Err(ConfigError::new(
+                    "test_span",
+                    "a search needs a test span > 0 s",
+                ));
+            }
+        }
+        if self.smooth && self.smooth_window < 3 {
+            return Err(ConfigError::new(
+                "smooth_window",
+                "must be at least 3 samples",
+            ));
+        }
+        if let Some(q) = &self.search_delays {
+            if q.is_empty() {
+                return Err(ConfigError::new("search_delays", "must not be empty"));
+            }
+            if q.contains(&0) {
+                return Err(ConfigError::new(
+                    "search_delays",
+                    "delays must be at least 1",
+                ));
+            }
+        }
+        if self.rank_start == 0 {
+            return Err(ConfigError::new("rank_start", "must be at least 1"));
+        }
+        if self.rank_step == 0 {
+            return Err(ConfigError::new("rank_step", "must be at least 1"));
+        }
+        non_negative("stability_tolerance", self.stability_tolerance)?;
+        if let Some(m) = self.payload_mass {
+            positive("payload_mass", m)?;
+        }
+        if let Some(l) = self.cable_length {
+            positive("cable_length", l)?;
+        }
+        positive("vehicle_mass", self.vehicle_mass)?;
+        non_negative("friction", self.friction)?;
+        finite("swing_band", self.swing_band[0])?;
+        finite("swing_band", self.swing_band[1])?;
+        if !(self.swing_band[0] > 0.0 && self.swing_band[0] < self.swing_band[1]) {
+            return Err(ConfigError::new(
+                "swing_band",
+                format!(
+                    "must be [low, high] with 0 < low < high Hz (got {:?})",
+                    self.swing_band
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Parse from JSON text (unknown keys and bad values name the field) and validate.
+    pub fn from_json(text: &str) -> Result<Self, ConfigError> {
+        let s: Self = crate::config::from_json_str(text)?;
+        s.validate()?;
+        Ok(s)
+    }
+
+    /// Delay count q of a fit.
+    pub fn fit_delays(&self) -> usize {
+        self.delays.unwrap_or(DEFAULT_DELAYS)
+    }
+
+    /// Rollout length in samples at `dt`.
+    pub fn rollout_samples(&self) -> usize {
+        ((self.rollout / self.dt).round() as usize).max(1)
+    }
+
+    /// Samples held out at the start of the data.
+    pub fn test_samples(&self) -> usize {
+        (self.test_span / self.dt).round() as usize
+    }
+
+    /// The search's scoring settings; `None` for the white-box.
+    pub fn search_settings(&self) -> Option<SearchSettings> {
+        Some(SearchSettings {
+            method: self.method.data_driven()?,
+            offset: self.offset,
+            dt: self.dt,
+            horizon: self.rollout_samples(),
+            starts: self.starts,
+            stability_tolerance: self.stability_tolerance,
+        })
+    }
+
+    /// The search's coarse grid.
+    pub fn coarse_grid(&self) -> Grid {
+        Grid {
+            delays: self
+                .search_delays
+                .clone()
+                .unwrap_or_else(|| (2..=60).step_by(4).collect()),
+            rank_start: self.rank_start,
+            rank_step: self.rank_step,
+            rank_window: None,
+        }
+    }
+}

@@ -1,0 +1,98 @@
+//! Conversions shared by every binding: settings dicts, serde values and numpy arrays.
+
+use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+use swing_core::{Category, ConfigError};
+
+use crate::errors::{raise, to_py};
+
+/// A settings dict (or None, for the defaults) → a core settings struct, by serde.
+///
+/// Unknown keys and values of the wrong type raise `ConfigError` naming `section.field`.
+pub fn settings<T: DeserializeOwned + Default>(
+    obj: Option<&Bound<'_, PyAny>>,
+    section: &str,
+) -> PyResult<T> {
+    match obj {
+        None => Ok(T::default()),
+        Some(o) if o.is_none() => Ok(T::default()),
+        Some(o) => from_py(o, section),
+    }
+}
+
+/// Any Python value → a serde type; errors name `section.field`.
+pub fn from_py<T: DeserializeOwned>(obj: &Bound<'_, PyAny>, section: &str) -> PyResult<T> {
+    let mut de = pythonize::Depythonizer::from_object(obj);
+    serde_path_to_error::deserialize(&mut de).map_err(|e| {
+        let err = swing_core::config::path_error(e);
+        to_py(within(err, section))
+    })
+}
+
+/// Prefix a config error's field with `section` (no prefix for an empty section).
+pub fn within(err: ConfigError, section: &str) -> ConfigError {
+    if section.is_empty() {
+        err
+    } else {
+        err.within(section)
+    }
+}
+
+/// A serde value → Python objects (dicts, lists, floats …).
+pub fn to_py_object<'py, T: Serialize>(py: Python<'py>, v: &T) -> PyResult<Bound<'py, PyAny>> {
+    pythonize::pythonize(py, v).map_err(|e| raise(Category::Data, e.to_string()))
+}
+
+/// Raise a `DataError`.
+pub fn data_err(msg: impl Into<String>) -> PyErr {
+    raise(Category::Data, msg)
+}
+
+/// Borrow a 2-D float64 C-contiguous array, or raise `DataError` naming it.
+pub fn array2<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<PyReadonlyArray2<'py, f64>> {
+    let arr: PyReadonlyArray2<'py, f64> = obj
+        .extract()
+        .map_err(|_| data_err(format!("{name} must be a 2-D numpy array of float64")))?;
+    // as_slice also accepts Fortran order, which would scramble the time-major layout.
+    if !arr.is_c_contiguous() {
+        return Err(data_err(format!("{name} must be C-contiguous")));
+    }
+    Ok(arr)
+}
+
+/// Borrow a 1-D float64 contiguous array, or raise `DataError` naming it.
+pub fn array1<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<PyReadonlyArray1<'py, f64>> {
+    let arr: PyReadonlyArray1<'py, f64> = obj
+        .extract()
+        .map_err(|_| data_err(format!("{name} must be a 1-D numpy array of float64")))?;
+    if arr.as_slice().is_err() {
+        return Err(data_err(format!("{name} must be contiguous")));
+    }
+    Ok(arr)
+}
+
+/// Columns of a 2-D array.
+pub fn cols(a: &PyReadonlyArray2<'_, f64>) -> usize {
+    a.shape()[1]
+}
+
+/// Write `text` to `path` atomically: a temporary file beside it, then a rename.
+pub fn write_atomic(path: &std::path::Path, text: &str) -> std::io::Result<()> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => std::path::PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&dir)?;
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".into());
+    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+    let result = std::fs::write(&tmp, text).and_then(|_| std::fs::rename(&tmp, path));
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
