@@ -1,5 +1,6 @@
 """Type stubs of the Rust extension ``swingrt._core`` (checked by ``stubtest`` in CI)."""
 
+import os
 from typing import Any
 
 import numpy as np
@@ -9,15 +10,35 @@ __version__: str
 
 # --- simulation -----------------------------------------------------------------------
 
-def scenario_from_toml(text: str) -> str: ...
-def scenario_from_json(text: str) -> str: ...
-def scenario_to_toml(json: str) -> str: ...
-def default_scenario(kind: str) -> str: ...
-def run_scenario(json: str) -> dict[str, npt.NDArray[np.float64]]: ...
-def sim_real_time_factor(json: str, seconds: float) -> float: ...
+class Scenario:
+    @staticmethod
+    def builtin(name: str = "step") -> Scenario: ...
+    @staticmethod
+    def from_toml(text: str, base: str = "step") -> Scenario: ...
+    @staticmethod
+    def from_dict(overrides: Any, base: str = "step") -> Scenario: ...
+    @staticmethod
+    def from_json(text: str) -> Scenario: ...
+    def with_overrides(self, overrides: Any) -> Scenario: ...
+    def to_dict(self) -> Any: ...
+    def to_json(self) -> str: ...
+    def to_toml(self) -> str: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def duration(self) -> float: ...
+    @property
+    def seed(self) -> int: ...
+    @property
+    def physics_dt(self) -> float: ...
+    def hover_thrust(self) -> float: ...
+    def schedule(self) -> Any: ...
+    def __reduce__(self) -> tuple[Any, tuple[str]]: ...
+
+def sim_real_time_factor(scenario: Scenario, seconds: float) -> float: ...
 
 class Simulator:
-    def __init__(self, json: str) -> None: ...
+    def __init__(self, scenario: Scenario) -> None: ...
     @property
     def t(self) -> float: ...
     @property
@@ -36,82 +57,102 @@ class Simulator:
     def take_trace(self) -> dict[str, npt.NDArray[np.float64]]: ...
     def tick_times(self) -> npt.NDArray[np.float64]: ...
     def attach_mpc(
-        self, model_json: str, settings_json: str | None, engage_at: float, budget: float
+        self, model: LinearModel, settings: Any, engage_at: float, budget: float
     ) -> None: ...
     def attach_lqr(
-        self,
-        m_q: float,
-        m_p: float,
-        l: float,
-        c: float,
-        axes: int,
-        settings_json: str | None,
-        engage_at: float,
-        budget: float,
+        self, params: Any, axes: int, settings: Any, engage_at: float, budget: float
     ) -> None: ...
     def controller_prediction(self) -> npt.NDArray[np.float64] | None: ...
 
 # --- system identification ---------------------------------------------------------------
 
-def sysid_fit(
+class LinearModel:
+    @staticmethod
+    def from_json(text: str) -> LinearModel: ...
+    @staticmethod
+    def load(path: str | os.PathLike[str]) -> LinearModel: ...
+    def to_json(self) -> str: ...
+    def save(self, path: str | os.PathLike[str]) -> None: ...
+    @property
+    def A(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def B(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def c(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def method(self) -> str: ...
+    @property
+    def dt(self) -> float: ...
+    @property
+    def delays(self) -> int: ...
+    @property
+    def rank(self) -> int: ...
+    @property
+    def states(self) -> list[str]: ...
+    @property
+    def inputs(self) -> list[str]: ...
+    @property
+    def offset(self) -> str: ...
+    @property
+    def input_mean(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def fingerprint(self) -> str: ...
+    @property
+    def order(self) -> int: ...
+    @property
+    def spectral_radius(self) -> float: ...
+    @property
+    def diagnostics(self) -> dict[str, Any]: ...
+    def with_diagnostics(self, items: dict[str, Any]) -> LinearModel: ...
+    def with_velocity_drag(self, k: float) -> LinearModel: ...
+    def predict(self, history: Any, inputs: Any) -> npt.NDArray[np.float64]: ...
+    def __reduce__(self) -> tuple[Any, tuple[str]]: ...
+
+class Search:
+    def table(self) -> list[dict[str, Any]]: ...
+    @property
+    def best(self) -> int: ...
+
+def identify_settings(settings: Any = None) -> dict[str, Any]: ...
+def identify(
     x: npt.NDArray[np.float64],
     u: npt.NDArray[np.float64],
     states: list[str],
     inputs: list[str],
+    settings: Any = None,
     *,
-    delays: int,
-    rank: int | None = None,
-    offset: str = "affine",
-    dt: float = 0.03,
-    method: str = "dmdc",
-) -> str: ...
-def sysid_search(
-    x_train: npt.NDArray[np.float64],
-    u_train: npt.NDArray[np.float64],
-    x_test: npt.NDArray[np.float64],
-    u_test: npt.NDArray[np.float64],
+    payload_mass: float | None = None,
+) -> tuple[LinearModel, Search | None]: ...
+def select_for_control(
+    x: npt.NDArray[np.float64],
+    u: npt.NDArray[np.float64],
     states: list[str],
     inputs: list[str],
-    *,
-    method: str = "dmdc",
-    offset: str = "affine",
-    dt: float = 0.03,
-    horizon: int = 667,
-    starts: int = 10,
-    delays: list[int] | None = None,
-    rank_start: int = 5,
-    rank_step: int = 5,
-    rank_extra: int = 0,
-    fine: tuple[int, int] | None = None,
-    stability_tolerance: float = 1e-3,
-) -> tuple[str, list[Any], int]: ...
-def sysid_evaluate(
-    model_json: str,
+    settings: Any,
+    search: Search,
+    plant: LinearModel,
+    mpc: Any = None,
+    selection: Any = None,
+) -> tuple[LinearModel, bool]: ...
+def evaluate(
+    model: LinearModel,
     x: npt.NDArray[np.float64],
     u: npt.NDArray[np.float64],
     *,
-    horizon: int,
+    rollout: int,
     starts: int = 10,
 ) -> tuple[list[float], float]: ...
-def sysid_predict(
-    model_json: str, history: npt.NDArray[np.float64], inputs: npt.NDArray[np.float64]
-) -> npt.NDArray[np.float64]: ...
-def sysid_check_model(model_json: str) -> tuple[str, float]: ...
-def sysid_whitebox(
-    states: list[str],
-    inputs: list[str],
+def whitebox_payload_mass(
+    thrust: npt.NDArray[np.float64],
+    vd: npt.NDArray[np.float64],
+    roll: npt.NDArray[np.float64] | None = None,
+    pitch: npt.NDArray[np.float64] | None = None,
     *,
-    payload_mass: float,
-    length: float,
-    vehicle_mass: float = 0.952,
-    friction: float = 0.0,
-    gravity: float = 9.81,
-    dt: float = 0.03,
-    frequency_hz: float | None = None,
-    x: npt.NDArray[np.float64] | None = None,
-    u: npt.NDArray[np.float64] | None = None,
-    offset: str = "none",
-) -> str: ...
+    dt: float,
+    skip: int = 0,
+    vehicle_mass: float,
+    forgetting: float = 1.0,
+) -> float: ...
 def sysid_fft_peak(
     signal: npt.NDArray[np.float64], dt: float, f_min: float, f_max: float
 ) -> float: ...
@@ -122,7 +163,7 @@ def sysid_rls_mass(
     thrust_vertical: npt.NDArray[np.float64],
     acc_down: npt.NDArray[np.float64],
     *,
-    gravity: float = 9.81,
+    gravity: float,
     forgetting: float = 1.0,
     initial: float = 1.0,
 ) -> npt.NDArray[np.float64]: ...
@@ -136,7 +177,7 @@ def sysid_smooth_gaussian(
 # --- control --------------------------------------------------------------------------
 
 class Mpc:
-    def __init__(self, model_json: str, settings: dict[str, Any] | None = None) -> None: ...
+    def __init__(self, model: LinearModel, settings: Any = None) -> None: ...
     @property
     def period(self) -> float: ...
     @property
@@ -150,15 +191,7 @@ class Mpc:
     def settings(self) -> dict[str, Any]: ...
 
 class Lqr:
-    def __init__(
-        self,
-        m_q: float,
-        m_p: float,
-        l: float,
-        c: float = 0.0,
-        axes: int = 1,
-        settings: dict[str, Any] | None = None,
-    ) -> None: ...
+    def __init__(self, params: Any, axes: int = 1, settings: Any = None) -> None: ...
     @property
     def period(self) -> float: ...
     @property
@@ -168,9 +201,9 @@ class Lqr:
     def gain(self) -> npt.NDArray[np.float64]: ...
 
 def mpc_step_check(
-    model_json: str,
-    plant_jsons: list[str],
-    settings: dict[str, Any] | None = None,
+    model: LinearModel,
+    plants: list[LinearModel],
+    settings: Any = None,
     step: float = 2.0,
     t_step: float = 2.0,
     duration: float = 20.0,
@@ -189,12 +222,12 @@ def dare(
     R: npt.NDArray[np.float64],
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
 def mpc_tick_timing(
-    model_json: str,
-    settings: dict[str, Any] | None = None,
+    model: LinearModel,
+    settings: Any = None,
     n_ticks: int = 2000,
     constrained: bool = False,
 ) -> dict[str, float]: ...
-def pendulum_model_json(
+def pendulum_model(
     m_q: float = 0.952,
     m_p: float = 0.2,
     l: float = 1.0,
@@ -203,4 +236,4 @@ def pendulum_model_json(
     delays: int = 50,
     axes: int = 1,
     seed: int = 7,
-) -> str: ...
+) -> LinearModel: ...
