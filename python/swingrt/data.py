@@ -47,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
-from swingrt._io import atomic_path
+from swingrt.io.atomic import atomic_path
 from swingrt.errors import DataError
 
 __all__ = [

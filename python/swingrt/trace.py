@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from swingrt._io import atomic_path
+from swingrt.io.atomic import atomic_path
 from swingrt.errors import DataError
 
 

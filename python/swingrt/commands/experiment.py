@@ -22,7 +22,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
 def run(args) -> int:
     """Run the subcommand."""
     from swingrt.errors import ConfigError
-    from swingrt.experiment import list_experiments, load_experiment, run_experiment
+    from swingrt.experiments import list_experiments, load_experiment, run_experiment
 
     if args.list:
         for name, desc in list_experiments().items():
