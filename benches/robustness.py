@@ -21,9 +21,9 @@ import math
 from swingrt.experiments import (
     cases,
     evaluation_scenario,
-    simulate_controller,
     list_experiments,
     load_experiment,
+    simulate_controller,
     training_scenario,
 )
 from swingrt.metrics import step_metrics

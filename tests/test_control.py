@@ -31,7 +31,8 @@ def test_mpc_damps_the_default_step_to_a_third_of_pid(default_models):
     model, lqr = default_models
     sc = resolve({"duration": 30.0}, default="step", seed=1)
     runs = {
-        c: simulate_controller(sc, c, model_json=model.to_json(), lqr_params=lqr)[0] for c in ("pid", "lqr", "mpc")
+        c: simulate_controller(sc, c, model_json=model.to_json(), lqr_params=lqr)[0]
+        for c in ("pid", "lqr", "mpc")
     }
     m = {c: step_metrics(tr, t0=2.0) for c, tr in runs.items()}
     assert m["mpc"]["swing_iae_deg_s"] <= m["pid"]["swing_iae_deg_s"] / 3

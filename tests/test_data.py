@@ -7,16 +7,10 @@ import struct
 import numpy as np
 import pytest
 
-from swingrt.data import (
-    TRACE_COLUMNS,
-    euler_to_quat,
-    load_flight,
-    quat_to_euler,
-    require,
-    write_columns,
-    write_ulog,
-)
 from swingrt.errors import DataError
+from swingrt.io import TRACE_COLUMNS, load_flight, require, write_columns
+from swingrt.io.ulog import euler_to_quat, quat_to_euler
+from swingrt.testing import write_ulog
 
 
 def synthetic_trace(duration: float = 12.0, dt: float = 0.01) -> dict[str, np.ndarray]:
@@ -224,24 +218,7 @@ def test_missing_file():
         load_flight("/nonexistent/flight.parquet")
 
 
-def _commands_available(*names: str) -> bool:
-    import importlib
-
-    for n in names:
-        try:
-            importlib.import_module(f"swingrt.commands.{n}")
-        except ImportError:
-            return False
-    import swingrt
-
-    return hasattr(swingrt, "Simulator")
-
-
-@pytest.mark.skipif(
-    not _commands_available("collect", "identify", "evaluate"),
-    reason="needs the simulator and the collect/identify/evaluate commands",
-)
-def test_identify_from_ulog_matches_parquet(tmp_path):  # pragma: no cover - until they land
+def test_identify_from_ulog_matches_parquet(tmp_path):
     """A simulated training flight written as ULog identifies a model as good as from the
     trace itself (held-out NMAE on another seed's flight)."""
     import json

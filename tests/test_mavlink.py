@@ -285,7 +285,7 @@ def test_mission_file(tmp_path):
 
 
 def test_random_step_mission_is_seeded_and_in_table_4_1_ranges():
-    from swingrt.mavlink.collect import random_step_mission
+    from swingrt.mavlink.training import random_step_mission
 
     a, b = random_step_mission(600, 7), random_step_mission(600, 7)
     assert a.steps == b.steps and a.steps != random_step_mission(600, 8).steps
@@ -378,7 +378,7 @@ def test_garbage_unknown_messages_and_wrong_system_do_not_crash(vehicle):
     assert "ignored SET_POSITION_TARGET_LOCAL_NED for system 42" in out
     assert "ignored unsupported message MANUAL_CONTROL" in out
     # SIGINT flushed the flight trace atomically (no temporary file left behind)
-    from swingrt.data import load_flight
+    from swingrt.io import load_flight
 
     trace = proc.args[-1]
     assert load_flight(trace, columns=["t", "vn", "swing_n"])["t"][-1] > 2.0
@@ -401,7 +401,7 @@ def write_mission(path: Path, step_at=1.0, back_at=5.0, duration=8.0) -> Path:
 
 
 def test_fly_mission_with_pd_double_and_clean_handback(vehicle, tmp_path):
-    from swingrt.data import load_flight
+    from swingrt.io import load_flight
 
     url, _ = vehicle
     mission = write_mission(tmp_path / "m.toml")
@@ -465,7 +465,7 @@ def test_overrun_hands_back_and_exits_nonzero(vehicle, tmp_path):
 
 
 def test_collect_over_mavlink_records_px4_velocity_control(vehicle, tmp_path):
-    from swingrt.data import load_flight
+    from swingrt.io import load_flight
     from swingrt.mavlink import collect_over_mavlink, random_step_mission
 
     url, _ = vehicle
@@ -540,7 +540,7 @@ def pure_simulation_iae(ctrl, axes: int, mission, ts: float) -> float:
 
 def sitl_flight(tmp_path, node_cmd) -> dict:
     """Run ``swingrt sitl`` on a free port and ``node_cmd(url)`` against it; the node's log."""
-    from swingrt.data import load_flight
+    from swingrt.io import load_flight
 
     url = f"udp:127.0.0.1:{free_port()}"
     sitl = subprocess.Popen(
@@ -561,7 +561,8 @@ def test_sitl_loop_matches_pure_simulation(tmp_path):
     """The MAVLink loop (``swingrt sitl`` + node, separate processes, real time) flies a
     controller like the same controller stepped on the simulator directly: swing IAE within
     20 %. The controller here is the PD stand-in; the MPC version is the next test."""
-    from swingrt.mavlink.offboard import Mission, PDSwingDamper
+    from swingrt.mavlink.offboard import Mission
+    from swingrt.testing import PDSwingDamper
 
     mission = write_mission(tmp_path / "m.toml", step_at=1.0, back_at=6.0, duration=10.0)
     iae_sim = pure_simulation_iae(PDSwingDamper(), 2, Mission.from_toml(mission), 0.03)
@@ -618,7 +619,8 @@ def _main(argv: list[str]) -> int:
         return 0
     if argv[0] == "node":
         from swingrt.errors import SwingrtError
-        from swingrt.mavlink.offboard import Mission, PDSwingDamper, fly
+        from swingrt.mavlink.offboard import Mission, fly
+        from swingrt.testing import PDSwingDamper
 
         ctrl = PDSwingDamper()
         if "--slow" in argv:

@@ -408,7 +408,6 @@ def _write_parquet(cols, path):
 
 
 def test_cli_identify_and_evaluate(tmp_path, capsys):
-    pytest.importorskip("swingrt.data")
     from swingrt.cli import main
 
     train, other = tmp_path / "train.parquet", tmp_path / "other.parquet"

@@ -7,8 +7,8 @@ import time
 from typing import Any
 
 from swingrt import _core
+from swingrt.io.flight import Trace
 from swingrt.scenario import ScenarioLike, resolve
-from swingrt.trace import Trace
 
 _MODES = {"pos", "vel", "acc"}
 _AXES = {"n": 0, "e": 1, "d": 2}

@@ -32,8 +32,8 @@ from typing import Any
 import numpy as np
 
 from swingrt import _core
-from swingrt.io.atomic import write_text_atomic
 from swingrt.errors import ConfigError, DataError, ModelError
+from swingrt.io.atomic import write_text_atomic
 
 __all__ = [
     "AXES",

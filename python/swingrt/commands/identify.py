@@ -50,7 +50,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
 def run(args) -> int:
     """Run the subcommand."""
     from swingrt import sysid
-    from swingrt.data import load_flight
+    from swingrt.io import load_flight
     from swingrt.reports import plot_pareto
 
     if not (math.isfinite(args.dt) and args.dt > 0):

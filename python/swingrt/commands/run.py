@@ -39,8 +39,8 @@ def run(args) -> int:
     out = Path(args.out)
     # The double descent of thesis 4.6.8 on this very training flight.
     from swingrt import sysid
+    from swingrt.io.flight import Trace
     from swingrt.reports import plot_training_length
-    from swingrt.trace import Trace
 
     train = Trace.from_parquet(out / "default-step__training.parquet")
     if not args.quiet:

@@ -10,11 +10,8 @@ predicted trajectory at the step against the one flown (figures 5.20–5.21).
 from __future__ import annotations
 
 import copy
-import csv
-import io
 import itertools
 import json
-import math
 import os
 import sys
 import time
@@ -28,10 +25,10 @@ from typing import Any
 import numpy as np
 
 from swingrt.errors import ConfigError
+from swingrt.io.flight import Trace
 from swingrt.metrics import step_metrics, swing_iae_floor
 from swingrt.reports import plot_case, plot_prediction, write_metrics
 from swingrt.scenario import _merge, builtin, read_toml, resolve
-from swingrt.trace import Trace
 
 
 def _defs() -> Traversable:

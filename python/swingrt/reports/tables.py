@@ -36,9 +36,7 @@ def csv_text(rows: Iterable[Mapping[str, Any]], columns: Sequence[str]) -> str:
     return buf.getvalue()
 
 
-def write_metrics(
-    out: Path, exp: Experiment, rows: list[dict[str, Any]], notes: list[str]
-) -> None:
+def write_metrics(out: Path, exp: Experiment, rows: list[dict[str, Any]], notes: list[str]) -> None:
     """``metrics.csv`` and ``metrics.md`` (atomic)."""
     formatted = [{k: _fmt(r[k]) for k in CSV_COLUMNS} for r in rows]
     write_text_atomic(out / "metrics.csv", csv_text(formatted, CSV_COLUMNS))
