@@ -489,24 +489,6 @@ def test_collect_over_mavlink_records_px4_velocity_control(vehicle, tmp_path):
 # ----------------------------------------------------------------------------- real physics
 
 
-def _simulator():
-    try:
-        import swingrt
-
-        return swingrt.Simulator
-    except (ImportError, AttributeError):
-        return None
-
-
-def _mpc_available() -> bool:
-    try:
-        from swingrt._core import Mpc  # noqa: F401
-
-        return True
-    except ImportError:
-        return False
-
-
 def pure_simulation_iae(ctrl, axes: int, mission, ts: float) -> float:
     """Swing IAE (North) of ``ctrl`` flying ``mission`` on the simulator directly at Ts,
     with the same state construction as the node (backward-difference swing rate)."""
@@ -556,7 +538,6 @@ def sitl_flight(tmp_path, node_cmd) -> dict:
     return load_flight(tmp_path / "fly.parquet", columns=["t", "vn", "swing_n"])
 
 
-@pytest.mark.skipif(_simulator() is None, reason="needs swingrt.Simulator")
 def test_sitl_loop_matches_pure_simulation(tmp_path):
     """The MAVLink loop (``swingrt sitl`` + node, separate processes, real time) flies a
     controller like the same controller stepped on the simulator directly: swing IAE within
@@ -575,10 +556,7 @@ def test_sitl_loop_matches_pure_simulation(tmp_path):
     assert 1.6 < np.mean(tr["vn"][(tr["t"] > 5.0) & (tr["t"] < 6.0)]) < 2.3
 
 
-@pytest.mark.skipif(
-    _simulator() is None or not _mpc_available(), reason="needs swingrt.Simulator and _core.Mpc"
-)
-def test_fly_against_sitl_damps_swing_like_pure_simulation(tmp_path):  # pragma: no cover
+def test_fly_against_sitl_damps_swing_like_pure_simulation(tmp_path):
     """The default mission flown by ``swingrt fly`` against ``swingrt sitl`` damps the swing
     within 20 % of the same MPC flown in pure simulation (swing IAE)."""
     from swingrt.mavlink.offboard import Mission, load_controller

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from swingrt import _core
-from swingrt.errors import ConfigError, DataError, ModelError
+from swingrt.errors import ConfigError, DataError, IdentificationError, ModelError
 from swingrt.io.atomic import write_text_atomic
 
 __all__ = [
@@ -399,7 +399,7 @@ def identify(
     _check_choice("offset", offset, _OFFSETS)
     _check_choice("axes", axes, tuple(AXES))
     if search and method == "whitebox":
-        raise ConfigError("--search applies to dmdc and havokc, not whitebox")
+        raise ConfigError("search applies to dmdc and havokc, not whitebox")
     if search:
         if delays is not None or rank is not None:
             raise ConfigError("give either search or delays/rank, not both")
@@ -732,7 +732,7 @@ def sweep_training_length(
                     "nmae": sel["nmae"],
                 }
             )
-        except (DataError, _identification_error()) as exc:
+        except (DataError, IdentificationError) as exc:
             rows.append(
                 {
                     "train_length": float(length),
@@ -743,12 +743,6 @@ def sweep_training_length(
                 }
             )
     return rows
-
-
-def _identification_error():
-    from swingrt.errors import IdentificationError
-
-    return IdentificationError
 
 
 def sweep_sample_time(

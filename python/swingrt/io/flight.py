@@ -182,12 +182,13 @@ def load_flight(
     suffix = p.suffix.lower()
     if suffix not in _SUFFIXES:
         raise DataError(
-            f"{p}: unknown data format '{p.suffix or '(none)'}' (expected .parquet, .csv or .ulg)"
+            f"{p}: unknown data format '{p.suffix or '(none)'}' (expected .parquet, .csv or .ulg)",
+            path=p,
         )
     if not p.is_file():
-        raise DataError(f"{p}: no such file")
+        raise DataError(f"{p}: no such file", path=p)
     if p.stat().st_size == 0:
-        raise DataError(f"{p}: file is empty")
+        raise DataError(f"{p}: file is empty", path=p)
     if suffix == ".ulg":
         from swingrt.io.ulog import load_ulog
 
@@ -208,12 +209,13 @@ def require(columns: Mapping[str, np.ndarray], names: Iterable[str], source: str
     """
     names = list(names)
     notes = getattr(columns, "notes", {})
+    path = getattr(columns, "source", "") or None
     missing = [n for n in names if n not in columns]
     if missing:
         why = "; ".join(sorted({notes[n] for n in missing if n in notes}))
         plural = "s" if len(missing) > 1 else ""
         msg = f"{source}: missing column{plural} {', '.join(missing)}"
-        raise DataError(msg + (f" ({why})" if why else ""))
+        raise DataError(msg + (f" ({why})" if why else ""), path=path)
     t = columns.get("t")
     for n in names:
         bad = ~np.isfinite(np.asarray(columns[n], dtype=float))
@@ -223,7 +225,9 @@ def require(columns: Mapping[str, np.ndarray], names: Iterable[str], source: str
             where = (
                 f"t = {float(t[i]):.3f} s" if t is not None and np.isfinite(t[i]) else f"row {i}"
             )
-            raise DataError(f"{source}: column {n} has a NaN gap at {where} ({j - i} sample(s))")
+            raise DataError(
+                f"{source}: column {n} has a NaN gap at {where} ({j - i} sample(s))", path=path
+            )
 
 
 def write_columns(
@@ -243,9 +247,9 @@ def write_columns(
     arrays = {k: np.asarray(v, dtype=float) for k, v in columns.items()}
     lengths = {len(v) for v in arrays.values()}
     if len(lengths) > 1:
-        raise DataError(f"{p}: columns have different lengths {sorted(lengths)}")
+        raise DataError(f"{p}: columns have different lengths {sorted(lengths)}", path=p)
     if suffix not in (".parquet", ".csv"):
-        raise DataError(f"{p}: cannot write '{p.suffix}' (use .parquet or .csv)")
+        raise DataError(f"{p}: cannot write '{p.suffix}' (use .parquet or .csv)", path=p)
     import pyarrow as pa
 
     table = pa.table(arrays)
@@ -280,10 +284,10 @@ def _load_table(p: Path, suffix: str) -> Trace:
     except (pa.ArrowInvalid, pa.ArrowException, OSError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         if "Empty CSV file" in first:
-            raise DataError(f"{p}: file is empty") from None
-        raise DataError(f"{p}: cannot read {suffix[1:]} file: {first}") from None
+            raise DataError(f"{p}: file is empty", path=p) from None
+        raise DataError(f"{p}: cannot read {suffix[1:]} file: {first}", path=p) from None
     if table.num_rows == 0:
-        raise DataError(f"{p}: file holds no rows")
+        raise DataError(f"{p}: file holds no rows", path=p)
     out = Trace(source=str(p))
     for name in table.column_names:
         col = table.column(name)
@@ -304,12 +308,14 @@ def _finish_time(data: Trace, source: str) -> None:
         return
     t = data["t"]
     if len(t) == 0:
-        raise DataError(f"{source}: file holds no samples")
+        raise DataError(f"{source}: file holds no samples", path=source)
     if not np.all(np.isfinite(t)):
         i = int(np.argmax(~np.isfinite(t)))
-        raise DataError(f"{source}: column t is not finite at row {i}")
+        raise DataError(f"{source}: column t is not finite at row {i}", path=source)
     dt = np.diff(t)
     if np.any(dt <= 0):
         i = int(np.argmax(dt <= 0)) + 1
-        raise DataError(f"{source}: time does not increase at row {i} (t = {t[i]:.6g} s)")
+        raise DataError(
+            f"{source}: time does not increase at row {i} (t = {t[i]:.6g} s)", path=source
+        )
     data["t"] = t - t[0]

@@ -108,7 +108,7 @@ def load_ulog(p: Path, ulog_swing: Mapping | None = None) -> Trace:
     try:
         from pyulog import ULog
     except ImportError:  # pragma: no cover - pyulog is a declared dependency
-        raise DataError(f"{p}: reading .ulg needs pyulog (pip install pyulog)") from None
+        raise DataError(f"{p}: reading .ulg needs pyulog (pip install pyulog)", path=p) from None
 
     swing = dict(DEFAULT_ULOG_SWING)
     explicit_swing = ulog_swing is not None
@@ -122,7 +122,7 @@ def load_ulog(p: Path, ulog_swing: Mapping | None = None) -> Trace:
     try:
         log = ULog(str(p))
     except Exception as exc:  # pyulog raises bare Exception / struct.error on bad files
-        raise DataError(f"{p}: not a readable ULog file ({exc})") from None
+        raise DataError(f"{p}: not a readable ULog file ({exc})", path=p) from None
 
     topics: dict[str, list] = {}
     for d in log.data_list:
@@ -140,13 +140,15 @@ def load_ulog(p: Path, ulog_swing: Mapping | None = None) -> Trace:
 
     pos = topic("vehicle_local_position")
     if pos is None:
-        raise DataError(f"{p}: ULog has no vehicle_local_position topic (the state estimate)")
+        raise DataError(
+            f"{p}: ULog has no vehicle_local_position topic (the state estimate)", path=p
+        )
     t_pos, fpos = pos
     if len(t_pos) < 2:
-        raise DataError(f"{p}: vehicle_local_position holds fewer than 2 samples")
+        raise DataError(f"{p}: vehicle_local_position holds fewer than 2 samples", path=p)
     for f in ("x", "y", "z", "vx", "vy", "vz"):
         if f not in fpos:
-            raise DataError(f"{p}: vehicle_local_position has no field {f}")
+            raise DataError(f"{p}: vehicle_local_position has no field {f}", path=p)
 
     # Collect every topic as (t_us, {column: values}) first, then crop and interpolate.
     sources: list[tuple[np.ndarray, dict[str, np.ndarray]]] = []
@@ -186,7 +188,7 @@ def load_ulog(p: Path, ulog_swing: Mapping | None = None) -> Trace:
     else:
         t_att, fatt = att
         if not all(f"q[{i}]" in fatt for i in range(4)):
-            raise DataError(f"{p}: vehicle_attitude has no field q[0..3]")
+            raise DataError(f"{p}: vehicle_attitude has no field q[0..3]", path=p)
         q = np.stack([fatt[f"q[{i}]"].astype(float) for i in range(4)])
         # Sign continuity: q and -q are the same attitude; interpolate along the short path.
         flip = np.cumsum(np.r_[0, (np.einsum("ij,ij->j", q[:, 1:], q[:, :-1]) < 0)]) % 2 == 1
@@ -230,7 +232,7 @@ def load_ulog(p: Path, ulog_swing: Mapping | None = None) -> Trace:
                 sources.append((t_sw, cols))
     if swing_why is not None:
         if explicit_swing:
-            raise DataError(f"{p}: {swing_why}")
+            raise DataError(f"{p}: {swing_why}", path=p)
         notes["swing_n"] = notes["swing_e"] = swing_why
 
     # Crop the base timeline to where every loaded topic has data (no extrapolation).
@@ -238,7 +240,7 @@ def load_ulog(p: Path, ulog_swing: Mapping | None = None) -> Trace:
     hi = min([t_pos[-1]] + [s[0][-1] for s in sources])
     keep = (t_pos >= lo) & (t_pos <= hi)
     if keep.sum() < 2:
-        raise DataError(f"{p}: the logged topics do not overlap in time")
+        raise DataError(f"{p}: the logged topics do not overlap in time", path=p)
     t_base = t_pos[keep]
     out = Trace(source=str(p), notes=notes)
     out["t"] = (t_base - t_base[0]) * 1e-6
