@@ -1,4 +1,4 @@
-"""Swing-damping control from Python (issue 4): bindings, closed loop, experiments, run."""
+"""Swing-damping control from Python: bindings, closed loop, experiments, run."""
 
 from __future__ import annotations
 

@@ -14,7 +14,7 @@ from swingrt.testing import write_ulog
 
 
 def synthetic_trace(duration: float = 12.0, dt: float = 0.01) -> dict[str, np.ndarray]:
-    """A smooth trace with every DESIGN section 2 column, distinct per column."""
+    """A smooth trace with every trace column, distinct per column."""
     t = np.arange(0.0, duration, dt)
     cols = {
         name: 0.01 * (i + 1) * np.sin((0.3 + 0.05 * i) * t + i)

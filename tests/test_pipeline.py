@@ -1,5 +1,5 @@
 """The whole pipeline as a user runs it: collect → identify (search, sweeps) → evaluate, and
-the main job ``swingrt run`` (issues 3 and 4, "done when")."""
+the main job ``swingrt run``."""
 
 from __future__ import annotations
 

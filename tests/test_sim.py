@@ -1,4 +1,4 @@
-"""The simulator from Python and the CLI (issue 2): API, files, determinism, bad input."""
+"""The simulator from Python and the CLI: API, files, determinism, bad input."""
 
 from __future__ import annotations
 

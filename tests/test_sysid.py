@@ -1,4 +1,4 @@
-"""System identification through the built extension (issue 3, item 8).
+"""System identification through the built extension.
 
 Synthetic tests use numpy-generated linear systems with closed-form answers; the
 acceptance tests on simulated flights run only when the simulator (``swingrt.collect``)

@@ -1,4 +1,4 @@
-"""The ``swingrt`` command line (DESIGN section 7).
+"""The ``swingrt`` command line (the subcommands are listed in the README).
 
 Each subcommand lives in ``swingrt.commands.<name>`` and exposes ``add_parser(subparsers)``
 and ``run(args) -> int``. Every user mistake ends with one line on stderr and a non-zero

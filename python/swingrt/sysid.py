@@ -1,7 +1,7 @@
-"""System identification from flight data (thesis chapter 4; DESIGN sections 4 and 7).
+"""System identification from flight data (thesis chapter 4).
 
-``identify`` turns a flight (a dict of numpy columns named as in DESIGN section 2, or any
-object with a ``.columns`` dict such as a :class:`swingrt.Trace`) into a
+``identify`` turns a flight (a :class:`swingrt.Trace`, or any mapping of numpy columns
+named as in :data:`swingrt.io.TRACE_COLUMNS`) into a
 :class:`LinearModel` over delay coordinates, z_{k+1} = A z_k + B (u_k - input_mean) + c with
 z_k = [x_k; x_{k-1}; ...; x_{k-q+1}] (newest first):
 
@@ -49,7 +49,7 @@ __all__ = [
     "sweep_training_length",
 ]
 
-#: State and input columns per axis choice (DESIGN section 4).
+#: State and input columns per axis choice.
 AXES: dict[str, tuple[list[str], list[str]]] = {
     "n": (["vn", "swing_n"], ["acc_sp_n"]),
     "ne": (["vn", "ve", "swing_n", "swing_e"], ["acc_sp_n", "acc_sp_e"]),

@@ -1,4 +1,4 @@
-"""``swingrt identify``: learn a linear model from flight data (DESIGN section 7)."""
+"""``swingrt identify``: learn a linear model from flight data."""
 
 from __future__ import annotations
 

@@ -1,10 +1,11 @@
 """Experiment runner: training flight → identification → PID / LQR / MPC on a step → report.
 
-Writes to the output folder: ``metrics.csv`` (columns of issue 4), ``metrics.md``, one
-Parquet trace per run named ``<scenario>__<controller>.parquet``, per-scenario PNG figures
-(velocity, swing angle and acceleration setpoint against time, controllers overlaid, as the
-thesis's figures 5.11–5.22), the identified models, and for the double pendulum the MPC's
-predicted trajectory at the step against the one flown (figures 5.20–5.21).
+Writes to the output folder: ``metrics.csv`` (columns :data:`swingrt.reports.CSV_COLUMNS`),
+``metrics.md``, one Parquet trace per run named ``<scenario>__<controller>.parquet``,
+per-scenario PNG figures (velocity, swing angle and acceleration setpoint against time,
+controllers overlaid, as the thesis's figures 5.11–5.22), the identified models, and for
+the double pendulum the MPC's predicted trajectory at the step against the one flown
+(figures 5.20–5.21).
 """
 
 from __future__ import annotations

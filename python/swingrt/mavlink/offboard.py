@@ -288,7 +288,7 @@ class FlightReport:
 
 # ----------------------------------------------------------------------------- session
 
-#: Columns the node logs: DESIGN section 2 trace columns + loop timing.
+#: Columns the node logs: the trace columns (:data:`swingrt.io.TRACE_COLUMNS`) + loop timing.
 NODE_COLUMNS = (
     "t", "pn", "pe", "pd", "vn", "ve", "vd", "roll", "pitch", "yaw", "swing_n", "swing_e",
     "swing_rate_n", "swing_rate_e", "acc_sp_n", "acc_sp_e", "acc_sp_d", "vel_sp_n",
