@@ -344,7 +344,7 @@ def search(
         rank_start=rank_start,
         rank_step=rank_step,
         rank_extra=1 if offset == "affine" else 0,
-        fine=tuple(fine) if fine else None,
+        fine=tuple(fine) if fine else None,  # type: ignore[arg-type]  # a (q, p) pair
         stability_tolerance=stability_tolerance,
     )
     table = [

@@ -447,8 +447,9 @@ class OffboardSession:
                 self._drain()
                 mono = time.monotonic()
                 reason = self.watchdog.check_inputs(self.tel, mono)
-                if reason is None and self.tel.seen_offboard and self.tel.mode[0] != OFFBOARD_MAIN:
-                    reason = f"vehicle left OFFBOARD (now {mode_name(*self.tel.mode)})"
+                mode = self.tel.mode  # set with seen_offboard, from the first HEARTBEAT
+                if reason is None and self.tel.seen_offboard and mode and mode[0] != OFFBOARD_MAIN:
+                    reason = f"vehicle left OFFBOARD (now {mode_name(*mode)})"
                 if reason is not None:
                     aborted = f"{reason} at t = {k * self.ts:.2f} s"
                     break
