@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import io
 import json
 
 import numpy as np
@@ -107,7 +108,7 @@ def test_experiment_list_and_a_small_experiment(tmp_path, cli):
     out = tmp_path / "out"
     r = cli("experiment", spec, "--out", out, "--quiet")
     assert r.returncode == 0, r.stderr
-    rows = list(csv.DictReader(open(out / "metrics.csv")))
+    rows = list(csv.DictReader(io.StringIO((out / "metrics.csv").read_text())))
     assert list(rows[0]) == [
         "scenario",
         "controller",

@@ -345,14 +345,15 @@ def test_garbage_unknown_messages_and_wrong_system_do_not_crash(vehicle):
     url, proc = vehicle
     conn = observer(url)
     host, port = url.split(":")[1], int(url.split(":")[2])
-    raw = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rng = np.random.default_rng(1)
-    for _ in range(20):
-        raw.sendto(rng.integers(0, 256, 300, dtype=np.uint8).tobytes(), (host, port))
-    raw.sendto(b"\xfd\x09\x00\x00\x00\xff\xbe\x60\xea\x00" + bytes(11), (host, port))
-    # a stream parser (PX4's too) may hold a partial frame from the garbage: 300 zero bytes
-    # (no start marker) complete any pending frame so that it fails its CRC and resyncs
-    raw.sendto(bytes(300), (host, port))
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as raw:
+        for _ in range(20):
+            raw.sendto(rng.integers(0, 256, 300, dtype=np.uint8).tobytes(), (host, port))
+        raw.sendto(b"\xfd\x09\x00\x00\x00\xff\xbe\x60\xea\x00" + bytes(11), (host, port))
+        # a stream parser (PX4's too) may hold a partial frame from the garbage: 300 zero
+        # bytes (no start marker) complete any pending frame so that it fails its CRC and
+        # resyncs
+        raw.sendto(bytes(300), (host, port))
     time.sleep(0.1)
     # well-formed messages this vehicle does not handle
     conn.mav.param_request_read_send(1, 1, b"COM_OF_LOSS_T", -1)
@@ -437,6 +438,7 @@ def test_failsafe_when_node_is_killed(vehicle, tmp_path):
     node.kill()
     t_kill = time.monotonic()
     node.wait(timeout=5)
+    node.stdout.close()
     while True:
         msg = obs.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5)
         if msg is not None and decode_px4_mode(msg.custom_mode) == (4, 3):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
@@ -33,6 +34,6 @@ def run(args) -> int:
     exp = load_experiment(args.name)
     out = args.out or f"runs/{exp.name}"
     rows = run_experiment(exp, out, seed=args.seed, quiet=args.quiet)
-    print(open(f"{out}/metrics.md", encoding="utf-8").read())
+    print(Path(out, "metrics.md").read_text(encoding="utf-8"))
     print(f"wrote {out}/ ({len(rows)} runs)")
     return 0

@@ -120,7 +120,9 @@ def load_ulog(p: Path, ulog_swing: Mapping | None = None) -> Trace:
         if ulog_swing.get("topic", "debug_vect") != "debug_vect" and "name" not in ulog_swing:
             swing["name"] = None
     try:
-        log = ULog(str(p))
+        # Our own handle, so that it is closed when pyulog fails half-way through the file.
+        with open(p, "rb") as fh:
+            log = ULog(fh)
     except Exception as exc:  # pyulog raises bare Exception / struct.error on bad files
         raise DataError(f"{p}: not a readable ULog file ({exc})", path=p) from None
 
