@@ -246,3 +246,31 @@ def test_identify_from_ulog_matches_parquet(tmp_path):
         ]
     assert scores[".ulg"] < 0.05
     assert scores[".ulg"] < 1.5 * scores[".parquet"] + 0.005
+
+
+def test_trace_is_the_flight_container(tmp_path):
+    """One container for simulated and loaded flights: dict-like columns, metadata, files."""
+    from swingrt import Trace
+    from swingrt.errors import MissingColumnError
+
+    cols = synthetic_trace(1.0)
+    tr = Trace(cols, {"scenario": {"name": "x"}})
+    assert len(tr) == len(cols["t"]) and "vn" in tr and "nope" not in tr
+    assert set(tr) == set(cols) and tr.get("nope") is None
+    with pytest.raises(MissingColumnError, match="trace has no column 'nope'") as info:
+        tr["nope"]
+    assert isinstance(info.value, DataError) and isinstance(info.value, KeyError)
+    tr.save(tmp_path / "a.parquet")
+    back = load_flight(tmp_path / "a.parquet")
+    assert isinstance(back, Trace) and back.source == str(tmp_path / "a.parquet")
+    assert Trace.from_parquet(tmp_path / "a.parquet").meta == {"scenario": {"name": "x"}}
+    with pytest.raises(DataError, match="differ in length"):
+        Trace({"t": [0.0, 1.0], "vn": [1.0]})
+
+
+def test_data_error_names_the_file(tmp_path):
+    path = tmp_path / "d.csv"
+    path.write_bytes(b"t,vn\n0,1\n0.1,2\n0.05,3\n")
+    with pytest.raises(DataError) as info:
+        load_flight(path)
+    assert info.value.path == str(path)
