@@ -304,6 +304,7 @@ def test_silent_link_gives_clear_error():
     with pytest.raises(LinkError, match=rf"^no heartbeat from {url} within 1 s$"):
         wait_heartbeat(conn, timeout=1.0)
     assert time.monotonic() - t0 < 2.0
+    conn.close()
     with pytest.raises(LinkError, match="cannot understand link URL"):
         connect("carrier-pigeon")
 
@@ -391,6 +392,7 @@ def test_wrong_system_id_is_detected(vehicle):
     conn = connect(url)
     with pytest.raises(LinkError, match="heartbeat from system 1 .* system 7 was expected"):
         wait_heartbeat(conn, timeout=2.5, system_id=7)
+    conn.close()
 
 
 def write_mission(path: Path, step_at=1.0, back_at=5.0, duration=8.0) -> Path:
