@@ -1,4 +1,4 @@
-"""Time DMDc identification: swingrt (Rust core) vs numpy vs PyDMD (issue 3, item 9).
+"""Time DMDc identification: swingrt (Rust core) vs numpy vs PyDMD.
 
 Same work in each: one DMDc fit (q = 50, rank 40, 120 s at Ts = 0.03 s, one axis
 [vn, swing_n] <- acc_sp_n, input mean subtracted), and the reference grid q = 2..60 step 2

@@ -18,12 +18,12 @@ import argparse
 import json
 import math
 
-from swingrt.experiment import (
+from swingrt.experiments import (
     cases,
     evaluation_scenario,
-    fly,
     list_experiments,
     load_experiment,
+    simulate_controller,
     training_scenario,
 )
 from swingrt.metrics import step_metrics
@@ -65,9 +65,9 @@ def main() -> int:
                         train, result, axes=exp.axes, mpc_settings=settings, **fit
                     )
                 model = result.model
-                pid, _ = fly(ev, "pid", axes=exp.axes)
+                pid, _ = simulate_controller(ev, "pid", axes=exp.axes)
                 ref = step_metrics(pid, t0=exp.step["t"], axis=axis)["swing_iae_deg_s"]
-                mpc, _ = fly(
+                mpc, _ = simulate_controller(
                     ev, "mpc", axes=exp.axes, model_json=model.to_json(), mpc_settings=settings
                 )
                 m = step_metrics(mpc, t0=exp.step["t"], axis=axis)

@@ -1,8 +1,9 @@
-"""Swing-damping control from Python (issue 4): bindings, closed loop, experiments, run."""
+"""Swing-damping control from Python: bindings, closed loop, experiments, run."""
 
 from __future__ import annotations
 
 import csv
+import io
 import json
 
 import numpy as np
@@ -11,7 +12,7 @@ import pytest
 import swingrt
 from swingrt import _core
 from swingrt.errors import ConfigError, ControlError, ModelError
-from swingrt.experiment import fly
+from swingrt.experiments import simulate_controller
 from swingrt.metrics import step_metrics
 from swingrt.scenario import resolve
 
@@ -31,7 +32,8 @@ def test_mpc_damps_the_default_step_to_a_third_of_pid(default_models):
     model, lqr = default_models
     sc = resolve({"duration": 30.0}, default="step", seed=1)
     runs = {
-        c: fly(sc, c, model_json=model.to_json(), lqr_params=lqr)[0] for c in ("pid", "lqr", "mpc")
+        c: simulate_controller(sc, c, model_json=model.to_json(), lqr_params=lqr)[0]
+        for c in ("pid", "lqr", "mpc")
     }
     m = {c: step_metrics(tr, t0=2.0) for c, tr in runs.items()}
     assert m["mpc"]["swing_iae_deg_s"] <= m["pid"]["swing_iae_deg_s"] / 3
@@ -48,7 +50,7 @@ def test_wind_step_has_no_steady_state_error_with_mpc(default_models):
         default="step",
         seed=2,
     )
-    tr, extras = fly(sc, "mpc", model_json=model.to_json())
+    tr, extras = simulate_controller(sc, "mpc", model_json=model.to_json())
     assert extras["fallback"] is None
     assert step_metrics(tr, t0=2.0)["ss_error"] <= 0.02
 
@@ -106,7 +108,7 @@ def test_experiment_list_and_a_small_experiment(tmp_path, cli):
     out = tmp_path / "out"
     r = cli("experiment", spec, "--out", out, "--quiet")
     assert r.returncode == 0, r.stderr
-    rows = list(csv.DictReader(open(out / "metrics.csv")))
+    rows = list(csv.DictReader(io.StringIO((out / "metrics.csv").read_text())))
     assert list(rows[0]) == [
         "scenario",
         "controller",
@@ -139,5 +141,5 @@ def test_controller_settings_errors_are_config_errors(default_models):
     model, _ = default_models
     sc = resolve({"duration": 5.0}, default="step")
     with pytest.raises(ConfigError, match="mpc.horizon"):
-        fly(sc, "mpc", model_json=model.to_json(), mpc_settings={"horizon": "long"})
+        simulate_controller(sc, "mpc", model_json=model.to_json(), mpc_settings={"horizon": "long"})
     json.loads(model.to_json())  # the model itself stays valid

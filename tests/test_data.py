@@ -7,20 +7,14 @@ import struct
 import numpy as np
 import pytest
 
-from swingrt.data import (
-    TRACE_COLUMNS,
-    euler_to_quat,
-    load_flight,
-    quat_to_euler,
-    require,
-    write_columns,
-    write_ulog,
-)
 from swingrt.errors import DataError
+from swingrt.io import TRACE_COLUMNS, load_flight, require, write_columns
+from swingrt.io.ulog import euler_to_quat, quat_to_euler
+from swingrt.testing import write_ulog
 
 
 def synthetic_trace(duration: float = 12.0, dt: float = 0.01) -> dict[str, np.ndarray]:
-    """A smooth trace with every DESIGN section 2 column, distinct per column."""
+    """A smooth trace with every trace column, distinct per column."""
     t = np.arange(0.0, duration, dt)
     cols = {
         name: 0.01 * (i + 1) * np.sin((0.3 + 0.05 * i) * t + i)
@@ -224,24 +218,7 @@ def test_missing_file():
         load_flight("/nonexistent/flight.parquet")
 
 
-def _commands_available(*names: str) -> bool:
-    import importlib
-
-    for n in names:
-        try:
-            importlib.import_module(f"swingrt.commands.{n}")
-        except ImportError:
-            return False
-    import swingrt
-
-    return hasattr(swingrt, "Simulator")
-
-
-@pytest.mark.skipif(
-    not _commands_available("collect", "identify", "evaluate"),
-    reason="needs the simulator and the collect/identify/evaluate commands",
-)
-def test_identify_from_ulog_matches_parquet(tmp_path):  # pragma: no cover - until they land
+def test_identify_from_ulog_matches_parquet(tmp_path):
     """A simulated training flight written as ULog identifies a model as good as from the
     trace itself (held-out NMAE on another seed's flight)."""
     import json
@@ -269,3 +246,31 @@ def test_identify_from_ulog_matches_parquet(tmp_path):  # pragma: no cover - unt
         ]
     assert scores[".ulg"] < 0.05
     assert scores[".ulg"] < 1.5 * scores[".parquet"] + 0.005
+
+
+def test_trace_is_the_flight_container(tmp_path):
+    """One container for simulated and loaded flights: dict-like columns, metadata, files."""
+    from swingrt import Trace
+    from swingrt.errors import MissingColumnError
+
+    cols = synthetic_trace(1.0)
+    tr = Trace(cols, {"scenario": {"name": "x"}})
+    assert len(tr) == len(cols["t"]) and "vn" in tr and "nope" not in tr
+    assert set(tr) == set(cols) and tr.get("nope") is None
+    with pytest.raises(MissingColumnError, match="trace has no column 'nope'") as info:
+        tr["nope"]
+    assert isinstance(info.value, DataError) and isinstance(info.value, KeyError)
+    tr.save(tmp_path / "a.parquet")
+    back = load_flight(tmp_path / "a.parquet")
+    assert isinstance(back, Trace) and back.source == str(tmp_path / "a.parquet")
+    assert Trace.from_parquet(tmp_path / "a.parquet").meta == {"scenario": {"name": "x"}}
+    with pytest.raises(DataError, match="differ in length"):
+        Trace({"t": [0.0, 1.0], "vn": [1.0]})
+
+
+def test_data_error_names_the_file(tmp_path):
+    path = tmp_path / "d.csv"
+    path.write_bytes(b"t,vn\n0,1\n0.1,2\n0.05,3\n")
+    with pytest.raises(DataError) as info:
+        load_flight(path)
+    assert info.value.path == str(path)

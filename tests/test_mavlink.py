@@ -285,7 +285,7 @@ def test_mission_file(tmp_path):
 
 
 def test_random_step_mission_is_seeded_and_in_table_4_1_ranges():
-    from swingrt.mavlink.collect import random_step_mission
+    from swingrt.mavlink.training import random_step_mission
 
     a, b = random_step_mission(600, 7), random_step_mission(600, 7)
     assert a.steps == b.steps and a.steps != random_step_mission(600, 8).steps
@@ -304,6 +304,7 @@ def test_silent_link_gives_clear_error():
     with pytest.raises(LinkError, match=rf"^no heartbeat from {url} within 1 s$"):
         wait_heartbeat(conn, timeout=1.0)
     assert time.monotonic() - t0 < 2.0
+    conn.close()
     with pytest.raises(LinkError, match="cannot understand link URL"):
         connect("carrier-pigeon")
 
@@ -345,14 +346,15 @@ def test_garbage_unknown_messages_and_wrong_system_do_not_crash(vehicle):
     url, proc = vehicle
     conn = observer(url)
     host, port = url.split(":")[1], int(url.split(":")[2])
-    raw = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rng = np.random.default_rng(1)
-    for _ in range(20):
-        raw.sendto(rng.integers(0, 256, 300, dtype=np.uint8).tobytes(), (host, port))
-    raw.sendto(b"\xfd\x09\x00\x00\x00\xff\xbe\x60\xea\x00" + bytes(11), (host, port))
-    # a stream parser (PX4's too) may hold a partial frame from the garbage: 300 zero bytes
-    # (no start marker) complete any pending frame so that it fails its CRC and resyncs
-    raw.sendto(bytes(300), (host, port))
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as raw:
+        for _ in range(20):
+            raw.sendto(rng.integers(0, 256, 300, dtype=np.uint8).tobytes(), (host, port))
+        raw.sendto(b"\xfd\x09\x00\x00\x00\xff\xbe\x60\xea\x00" + bytes(11), (host, port))
+        # a stream parser (PX4's too) may hold a partial frame from the garbage: 300 zero
+        # bytes (no start marker) complete any pending frame so that it fails its CRC and
+        # resyncs
+        raw.sendto(bytes(300), (host, port))
     time.sleep(0.1)
     # well-formed messages this vehicle does not handle
     conn.mav.param_request_read_send(1, 1, b"COM_OF_LOSS_T", -1)
@@ -378,7 +380,7 @@ def test_garbage_unknown_messages_and_wrong_system_do_not_crash(vehicle):
     assert "ignored SET_POSITION_TARGET_LOCAL_NED for system 42" in out
     assert "ignored unsupported message MANUAL_CONTROL" in out
     # SIGINT flushed the flight trace atomically (no temporary file left behind)
-    from swingrt.data import load_flight
+    from swingrt.io import load_flight
 
     trace = proc.args[-1]
     assert load_flight(trace, columns=["t", "vn", "swing_n"])["t"][-1] > 2.0
@@ -390,6 +392,7 @@ def test_wrong_system_id_is_detected(vehicle):
     conn = connect(url)
     with pytest.raises(LinkError, match="heartbeat from system 1 .* system 7 was expected"):
         wait_heartbeat(conn, timeout=2.5, system_id=7)
+    conn.close()
 
 
 def write_mission(path: Path, step_at=1.0, back_at=5.0, duration=8.0) -> Path:
@@ -401,7 +404,7 @@ def write_mission(path: Path, step_at=1.0, back_at=5.0, duration=8.0) -> Path:
 
 
 def test_fly_mission_with_pd_double_and_clean_handback(vehicle, tmp_path):
-    from swingrt.data import load_flight
+    from swingrt.io import load_flight
 
     url, _ = vehicle
     mission = write_mission(tmp_path / "m.toml")
@@ -437,6 +440,7 @@ def test_failsafe_when_node_is_killed(vehicle, tmp_path):
     node.kill()
     t_kill = time.monotonic()
     node.wait(timeout=5)
+    node.stdout.close()
     while True:
         msg = obs.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5)
         if msg is not None and decode_px4_mode(msg.custom_mode) == (4, 3):
@@ -465,7 +469,7 @@ def test_overrun_hands_back_and_exits_nonzero(vehicle, tmp_path):
 
 
 def test_collect_over_mavlink_records_px4_velocity_control(vehicle, tmp_path):
-    from swingrt.data import load_flight
+    from swingrt.io import load_flight
     from swingrt.mavlink import collect_over_mavlink, random_step_mission
 
     url, _ = vehicle
@@ -487,24 +491,6 @@ def test_collect_over_mavlink_records_px4_velocity_control(vehicle, tmp_path):
 
 
 # ----------------------------------------------------------------------------- real physics
-
-
-def _simulator():
-    try:
-        import swingrt
-
-        return swingrt.Simulator
-    except (ImportError, AttributeError):
-        return None
-
-
-def _mpc_available() -> bool:
-    try:
-        from swingrt._core import Mpc  # noqa: F401
-
-        return True
-    except ImportError:
-        return False
 
 
 def pure_simulation_iae(ctrl, axes: int, mission, ts: float) -> float:
@@ -540,7 +526,7 @@ def pure_simulation_iae(ctrl, axes: int, mission, ts: float) -> float:
 
 def sitl_flight(tmp_path, node_cmd) -> dict:
     """Run ``swingrt sitl`` on a free port and ``node_cmd(url)`` against it; the node's log."""
-    from swingrt.data import load_flight
+    from swingrt.io import load_flight
 
     url = f"udp:127.0.0.1:{free_port()}"
     sitl = subprocess.Popen(
@@ -556,12 +542,12 @@ def sitl_flight(tmp_path, node_cmd) -> dict:
     return load_flight(tmp_path / "fly.parquet", columns=["t", "vn", "swing_n"])
 
 
-@pytest.mark.skipif(_simulator() is None, reason="needs swingrt.Simulator")
 def test_sitl_loop_matches_pure_simulation(tmp_path):
     """The MAVLink loop (``swingrt sitl`` + node, separate processes, real time) flies a
     controller like the same controller stepped on the simulator directly: swing IAE within
     20 %. The controller here is the PD stand-in; the MPC version is the next test."""
-    from swingrt.mavlink.offboard import Mission, PDSwingDamper
+    from swingrt.mavlink.offboard import Mission
+    from swingrt.testing import PDSwingDamper
 
     mission = write_mission(tmp_path / "m.toml", step_at=1.0, back_at=6.0, duration=10.0)
     iae_sim = pure_simulation_iae(PDSwingDamper(), 2, Mission.from_toml(mission), 0.03)
@@ -574,10 +560,7 @@ def test_sitl_loop_matches_pure_simulation(tmp_path):
     assert 1.6 < np.mean(tr["vn"][(tr["t"] > 5.0) & (tr["t"] < 6.0)]) < 2.3
 
 
-@pytest.mark.skipif(
-    _simulator() is None or not _mpc_available(), reason="needs swingrt.Simulator and _core.Mpc"
-)
-def test_fly_against_sitl_damps_swing_like_pure_simulation(tmp_path):  # pragma: no cover
+def test_fly_against_sitl_damps_swing_like_pure_simulation(tmp_path):
     """The default mission flown by ``swingrt fly`` against ``swingrt sitl`` damps the swing
     within 20 % of the same MPC flown in pure simulation (swing IAE)."""
     from swingrt.mavlink.offboard import Mission, load_controller
@@ -618,7 +601,8 @@ def _main(argv: list[str]) -> int:
         return 0
     if argv[0] == "node":
         from swingrt.errors import SwingrtError
-        from swingrt.mavlink.offboard import Mission, PDSwingDamper, fly
+        from swingrt.mavlink.offboard import Mission, fly
+        from swingrt.testing import PDSwingDamper
 
         ctrl = PDSwingDamper()
         if "--slow" in argv:

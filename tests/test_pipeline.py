@@ -1,9 +1,10 @@
 """The whole pipeline as a user runs it: collect → identify (search, sweeps) → evaluate, and
-the main job ``swingrt run`` (issues 3 and 4, "done when")."""
+the main job ``swingrt run``."""
 
 from __future__ import annotations
 
 import csv
+import io
 import json
 
 import pytest
@@ -37,7 +38,7 @@ def test_training_length_sweep_writes_table_and_plot(flights, cli):
         "-o", flights / "m2.json",
     )  # fmt: skip
     assert r.returncode == 0, r.stderr
-    rows = list(csv.DictReader(open(out / "sweep_length.csv")))
+    rows = list(csv.DictReader(io.StringIO((out / "sweep_length.csv").read_text())))
     assert [float(x["train_length"]) for x in rows] == [20.0, 40.0, 60.0, 80.0, 100.0, 120.0]
     assert all(0 < float(x["nmae"]) < 0.2 for x in rows)
     assert (out / "error_vs_training_length.png").is_file()
@@ -47,7 +48,8 @@ def test_main_job_writes_the_report(tmp_path, cli):
     out = tmp_path / "report"
     r = cli("run", "--out", out, "--quiet")
     assert r.returncode == 0, r.stderr
-    rows = {x["controller"]: x for x in csv.DictReader(open(out / "metrics.csv"))}
+    text = (out / "metrics.csv").read_text()
+    rows = {x["controller"]: x for x in csv.DictReader(io.StringIO(text))}
     assert set(rows) == {"pid", "lqr", "mpc"}
     pid = float(rows["pid"]["swing_iae_deg_s"])
     assert float(rows["mpc"]["swing_iae_deg_s"]) <= pid / 3

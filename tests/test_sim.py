@@ -1,4 +1,4 @@
-"""The simulator from Python and the CLI (issue 2): API, files, determinism, bad input."""
+"""The simulator from Python and the CLI: API, files, determinism, bad input."""
 
 from __future__ import annotations
 
@@ -177,3 +177,12 @@ def test_swing_iae_floor_is_the_payload_momentum_change():
     cols = dict(t=tt, vn=z, ve=z, swing_n=bump, swing_e=z, acc_sp_n=z, acc_sp_e=z)
     cols.update(vel_sp_n=np.where(tt >= 2.0, 1.0, 0.0), vel_sp_e=z)
     assert swing_iae_floor(swingrt.Trace(cols), t0=2.0) == pytest.approx(10 / math.pi, rel=0.01)
+
+
+def test_config_error_carries_the_dotted_field():
+    with pytest.raises(ConfigError, match="payload.mass") as info:
+        swingrt.simulate({"payload": {"mass": -0.1}}, duration=1.0)
+    assert info.value.field == "payload.mass"
+    assert ConfigError("exp.toml: axes: must be 'n' or 'ne'").field == "axes"
+    assert ConfigError("unknown experiment 'x'").field is None
+    assert ConfigError("anything", field="mpc.horizon").field == "mpc.horizon"

@@ -1,4 +1,4 @@
-"""System identification through the built extension (issue 3, item 8).
+"""System identification through the built extension.
 
 Synthetic tests use numpy-generated linear systems with closed-form answers; the
 acceptance tests on simulated flights run only when the simulator (``swingrt.collect``)
@@ -16,6 +16,7 @@ import pytest
 import swingrt
 from swingrt import _core, sysid
 from swingrt.errors import ConfigError, DataError, IdentificationError, ModelError
+from swingrt.reports import plots
 
 DT = 0.03
 
@@ -380,8 +381,8 @@ def test_sweeps_and_plots(tmp_path):
     assert [r["train_length"] for r in rows] == [30.0, 60.0, 110.0]
     assert all(math.isfinite(r["nmae"]) for r in rows)
     res = sysid.search(cols, delays=[2, 6, 10], fine=None)
-    sysid.plot_pareto(res, tmp_path / "pareto.png")
-    sysid.plot_training_length(rows, tmp_path / "length.png")
+    plots.plot_pareto(res, tmp_path / "pareto.png")
+    plots.plot_training_length(rows, tmp_path / "length.png")
     for name in ("pareto.png", "length.png"):
         assert (tmp_path / name).read_bytes()[:4] == b"\x89PNG"
     dts = sysid.sweep_sample_time(cols, [0.03, 0.05], delays=[2, 6])
@@ -407,7 +408,6 @@ def _write_parquet(cols, path):
 
 
 def test_cli_identify_and_evaluate(tmp_path, capsys):
-    pytest.importorskip("swingrt.data")
     from swingrt.cli import main
 
     train, other = tmp_path / "train.parquet", tmp_path / "other.parquet"
@@ -493,7 +493,7 @@ def test_sim_fft_length_on_free_swing(mass, length):
 
 
 def _grid_case(case):
-    from swingrt.experiment import cases, evaluation_scenario, load_experiment, training_scenario
+    from swingrt.experiments import cases, evaluation_scenario, load_experiment, training_scenario
     from swingrt.sim import _run
 
     exp = load_experiment("payload-grid")
@@ -507,7 +507,7 @@ def test_select_for_control_rejects_the_nmae_best_model_that_cannot_fly():
     the setpoint after 28 s in flight; the closed-loop check rejects it and the model it
     selects tracks the step without offset on the full simulator."""
     _need_sim()
-    from swingrt.experiment import fly
+    from swingrt.experiments import simulate_controller
     from swingrt.metrics import step_metrics
 
     train, ev = _grid_case("mp0.3_l1")
@@ -521,7 +521,7 @@ def test_select_for_control_rejects_the_nmae_best_model_that_cannot_fly():
     assert (sel["delays"], sel["rank"]) == (picked.model.delays, picked.model.rank)
     flown = {}
     for name, m in [("nmae_best", result.model), ("selected", picked.model)]:
-        trace, _ = fly(ev, "mpc", model_json=m.to_json())
+        trace, _ = simulate_controller(ev, "mpc", model_json=m.to_json())
         flown[name] = step_metrics(trace, t0=2.0)
     assert flown["selected"]["ss_error"] < 0.02, flown
     assert math.isfinite(flown["selected"]["v_settle_s"]), flown

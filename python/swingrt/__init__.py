@@ -9,11 +9,11 @@ from __future__ import annotations
 
 from swingrt import errors
 from swingrt._core import __version__
+from swingrt.io.flight import Trace
 from swingrt.metrics import step_metrics
 from swingrt.scenario import resolve as resolve_scenario
 from swingrt.sim import Simulator, collect, simulate
 from swingrt.sysid import LinearModel, evaluate, identify
-from swingrt.trace import Trace
 
 __all__ = [
     "__version__",

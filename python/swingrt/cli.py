@@ -1,4 +1,4 @@
-"""The ``swingrt`` command line (DESIGN section 7).
+"""The ``swingrt`` command line (the subcommands are listed in the README).
 
 Each subcommand lives in ``swingrt.commands.<name>`` and exposes ``add_parser(subparsers)``
 and ``run(args) -> int``. Every user mistake ends with one line on stderr and a non-zero
@@ -28,7 +28,7 @@ COMMANDS = (
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """Build the argument parser with every available subcommand."""
+    """Build the argument parser with every subcommand."""
     from swingrt import __version__
 
     parser = argparse.ArgumentParser(
@@ -38,12 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"swingrt {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
-        try:
-            module = importlib.import_module(f"swingrt.commands.{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name == f"swingrt.commands.{name}":
-                continue  # subcommand not shipped in this build
-            raise
+        module = importlib.import_module(f"swingrt.commands.{name}")
         p = module.add_parser(sub)
         p.set_defaults(_run=module.run)
     return parser

@@ -1,4 +1,4 @@
-"""Step-response metrics of a trace (thesis 5.5; issue 4's ``metrics.csv`` columns).
+"""Step-response metrics of a trace (thesis 5.5; the ``metrics.csv`` columns).
 
 For a velocity step at ``t0`` along ``axis`` (``n``, ``e`` or ``ne``, the last projected on
 the step direction), over the window after the step:

@@ -103,8 +103,3 @@ def resolve(
         merged["seed"] = int(seed)
     _check_finite(merged)
     return json.loads(_core.scenario_from_json(json.dumps(merged)))
-
-
-def to_toml(scenario: dict[str, Any]) -> str:
-    """Serialise a resolved scenario as TOML (what ``--dump-scenario`` prints)."""
-    return _core.scenario_to_toml(json.dumps(scenario))

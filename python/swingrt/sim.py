@@ -1,4 +1,11 @@
-"""Simulation from Python: ``simulate``, ``collect`` and the steppable ``Simulator``."""
+"""Simulation from Python: ``simulate``, ``collect`` and the steppable ``Simulator``.
+
+:class:`Simulator` is the public steppable simulator (named per-axis setpoints, a
+:class:`~swingrt.io.Trace` out). ``_core.Simulator`` is the binding underneath it: whole-run
+helpers inside the package (:func:`simulate`, :func:`collect`,
+:func:`swingrt.experiments.simulate_controller`) drive it directly because they need its
+run-to-end, progress and controller-attachment calls, which the wrapper does not expose.
+"""
 
 from __future__ import annotations
 
@@ -7,8 +14,8 @@ import time
 from typing import Any
 
 from swingrt import _core
+from swingrt.io.flight import Trace
 from swingrt.scenario import ScenarioLike, resolve
-from swingrt.trace import Trace
 
 _MODES = {"pos", "vel", "acc"}
 _AXES = {"n": 0, "e": 1, "d": 2}
@@ -56,11 +63,6 @@ class Simulator:
     def t(self) -> float:
         """Simulated time [s]."""
         return self._sim.t
-
-    @property
-    def core(self):
-        """The underlying ``swingrt._core.Simulator``."""
-        return self._sim
 
     def advance(self, dt: float) -> None:
         """Advance physics and PX4 cascade by ``dt`` seconds."""

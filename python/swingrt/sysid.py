@@ -1,7 +1,7 @@
-"""System identification from flight data (thesis chapter 4; DESIGN sections 4 and 7).
+"""System identification from flight data (thesis chapter 4).
 
-``identify`` turns a flight (a dict of numpy columns named as in DESIGN section 2, or any
-object with a ``.columns`` dict such as a :class:`swingrt.Trace`) into a
+``identify`` turns a flight (a :class:`swingrt.Trace`, or any mapping of numpy columns
+named as in :data:`swingrt.io.TRACE_COLUMNS`) into a
 :class:`LinearModel` over delay coordinates, z_{k+1} = A z_k + B (u_k - input_mean) + c with
 z_k = [x_k; x_{k-1}; ...; x_{k-q+1}] (newest first):
 
@@ -15,7 +15,8 @@ The data are resampled linearly onto a uniform grid of ``dt`` (default 0.03 s). 
 ``test_span`` seconds (default 40 s) are held out for scoring; models are trained on the
 rest (section 4.6.1). ``evaluate`` scores a model by the k-step rollout NMAE of section 4.6.2
 (10 start points, 20 s horizon, true inputs only). The numerics run in the Rust core
-(``swingrt._core``); this module prepares columns, splits, sweeps and plots.
+(``swingrt._core``); this module prepares columns, splits and sweeps
+(figures are in :mod:`swingrt.reports.plots`).
 """
 
 from __future__ import annotations
@@ -31,8 +32,8 @@ from typing import Any
 import numpy as np
 
 from swingrt import _core
-from swingrt._io import atomic_path, write_text_atomic
-from swingrt.errors import ConfigError, DataError, ModelError
+from swingrt.errors import ConfigError, DataError, IdentificationError, ModelError
+from swingrt.io.atomic import write_text_atomic
 
 __all__ = [
     "AXES",
@@ -40,8 +41,6 @@ __all__ = [
     "SearchResult",
     "evaluate",
     "identify",
-    "plot_pareto",
-    "plot_training_length",
     "resample",
     "search",
     "select_for_control",
@@ -50,7 +49,7 @@ __all__ = [
     "sweep_training_length",
 ]
 
-#: State and input columns per axis choice (DESIGN section 4).
+#: State and input columns per axis choice.
 AXES: dict[str, tuple[list[str], list[str]]] = {
     "n": (["vn", "swing_n"], ["acc_sp_n"]),
     "ne": (["vn", "ve", "swing_n", "swing_e"], ["acc_sp_n", "acc_sp_e"]),
@@ -345,7 +344,7 @@ def search(
         rank_start=rank_start,
         rank_step=rank_step,
         rank_extra=1 if offset == "affine" else 0,
-        fine=tuple(fine) if fine else None,
+        fine=tuple(fine) if fine else None,  # type: ignore[arg-type]  # a (q, p) pair
         stability_tolerance=stability_tolerance,
     )
     table = [
@@ -400,7 +399,7 @@ def identify(
     _check_choice("offset", offset, _OFFSETS)
     _check_choice("axes", axes, tuple(AXES))
     if search and method == "whitebox":
-        raise ConfigError("--search applies to dmdc and havokc, not whitebox")
+        raise ConfigError("search applies to dmdc and havokc, not whitebox")
     if search:
         if delays is not None or rank is not None:
             raise ConfigError("give either search or delays/rank, not both")
@@ -733,7 +732,7 @@ def sweep_training_length(
                     "nmae": sel["nmae"],
                 }
             )
-        except (DataError, _identification_error()) as exc:
+        except (DataError, IdentificationError) as exc:
             rows.append(
                 {
                     "train_length": float(length),
@@ -744,12 +743,6 @@ def sweep_training_length(
                 }
             )
     return rows
-
-
-def _identification_error():
-    from swingrt.errors import IdentificationError
-
-    return IdentificationError
 
 
 def sweep_sample_time(
@@ -808,58 +801,3 @@ def sweep_noise(
         for row in sweep_training_length(d, lengths, method=method, smooth=sm, **kwargs):
             rows.append({**row, "noise": flag})
     return rows
-
-
-# --------------------------------------------------------------------------- plots
-
-
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _save(fig, path: str | os.PathLike[str]) -> None:
-    suffix = Path(path).suffix or ".png"
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format=suffix.lstrip("."), dpi=120, bbox_inches="tight")
-    _pyplot().close(fig)
-
-
-def plot_pareto(result: SearchResult, path: str | os.PathLike[str]) -> None:
-    """Lowest stable NMAE per q (the Pareto elbow of figure 4.6), saved atomically."""
-    plt = _pyplot()
-    rows = result.best_per_delay()
-    fig, ax = plt.subplots(figsize=(6, 4))
-    ax.plot([r["delays"] for r in rows], [r["nmae"] for r in rows], "o-")
-    sel = result.model.diagnostics.get("selected")
-    if sel:
-        ax.plot([sel["delays"]], [sel["nmae"]], "r*", ms=12, label="selected")
-        ax.legend()
-    ax.set_xlabel("delays q")
-    ax.set_ylabel("held-out NMAE (best stable p)")
-    ax.set_yscale("log")
-    ax.grid(True, which="both", alpha=0.3)
-    _save(fig, path)
-
-
-def plot_training_length(rows: list[dict[str, Any]], path: str | os.PathLike[str]) -> None:
-    """NMAE vs training length (the double descent of section 4.6.8), one line per
-    ``noise`` flag when present, saved atomically."""
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(6, 4))
-    groups: dict[Any, list[dict[str, Any]]] = {}
-    for r in rows:
-        groups.setdefault(r.get("noise"), []).append(r)
-    for key, rs in groups.items():
-        rs = [r for r in rs if math.isfinite(r["nmae"])]
-        label = {None: "NMAE", True: "with noise", False: "without noise"}[key]
-        ax.plot([r["train_length"] for r in rs], [r["nmae"] for r in rs], "o-", label=label)
-    ax.set_xlabel("training length [s]")
-    ax.set_ylabel("held-out NMAE")
-    ax.grid(True, alpha=0.3)
-    ax.legend()
-    _save(fig, path)

@@ -1,4 +1,4 @@
-"""``swingrt bench``: the on-target performance suite (DESIGN §8)."""
+"""``swingrt bench``: the on-target performance suite."""
 
 from __future__ import annotations
 
@@ -120,7 +120,7 @@ def run(args) -> int:
     out: dict = {"machine": platform.machine(), "processor": platform.processor() or None}
     for name, fn in SECTIONS.items():
         res = fn(args.quick)
-        # Flat figures (dmdc_fit_ms, …) sit at the top level as the issues name them.
+        # Flat figures (dmdc_fit_ms, …) sit at the top level, as the README names them.
         if name in ("sysid", "mpc"):
             out.update(res)
         else:

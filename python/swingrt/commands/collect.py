@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 
 from swingrt.commands._common import add_scenario_args, check_duration, check_output
 
@@ -62,6 +63,6 @@ def run(args) -> int:
     steps = int((abs(vsp[1:] - vsp[:-1]) > 1e-9).sum())
     print(
         f"wrote {args.output}: {len(trace)} rows, {trace.t[-1]:.1f} s, "
-        f"{steps} velocity steps, peak swing {abs(trace['swing_n']).max() * 57.29578:.1f}°"
+        f"{steps} velocity steps, peak swing {math.degrees(abs(trace['swing_n']).max()):.1f}°"
     )
     return 0

@@ -25,8 +25,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
 def run(args) -> int:
     """Run the subcommand."""
     from swingrt import sysid
-    from swingrt.data import load_flight
     from swingrt.errors import ConfigError
+    from swingrt.io import load_flight
 
     if args.starts < 1:
         raise ConfigError(f"--starts: must be at least 1 (got {args.starts})")

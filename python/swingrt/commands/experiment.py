@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
@@ -22,7 +23,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
 def run(args) -> int:
     """Run the subcommand."""
     from swingrt.errors import ConfigError
-    from swingrt.experiment import list_experiments, load_experiment, run_experiment
+    from swingrt.experiments import list_experiments, load_experiment, run_experiment
 
     if args.list:
         for name, desc in list_experiments().items():
@@ -33,6 +34,6 @@ def run(args) -> int:
     exp = load_experiment(args.name)
     out = args.out or f"runs/{exp.name}"
     rows = run_experiment(exp, out, seed=args.seed, quiet=args.quiet)
-    print(open(f"{out}/metrics.md", encoding="utf-8").read())
+    print(Path(out, "metrics.md").read_text(encoding="utf-8"))
     print(f"wrote {out}/ ({len(rows)} runs)")
     return 0

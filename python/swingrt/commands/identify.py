@@ -1,4 +1,4 @@
-"""``swingrt identify``: learn a linear model from flight data (DESIGN section 7)."""
+"""``swingrt identify``: learn a linear model from flight data."""
 
 from __future__ import annotations
 
@@ -50,7 +50,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
 def run(args) -> int:
     """Run the subcommand."""
     from swingrt import sysid
-    from swingrt.data import load_flight
+    from swingrt.io import load_flight
+    from swingrt.reports import plot_pareto
 
     if not (math.isfinite(args.dt) and args.dt > 0):
         raise ConfigError(f"--dt: must be a positive number of seconds (got {args.dt})")
@@ -96,7 +97,7 @@ def run(args) -> int:
     if args.plots:
         out = Path(args.plots)
         if result is not None:
-            sysid.plot_pareto(result, out / "error_vs_delays.png")
+            plot_pareto(result, out / "error_vs_delays.png")
             print(f"wrote {out / 'error_vs_delays.png'}")
     if args.sweep:
         _sweep(args, data, common)
@@ -106,13 +107,11 @@ def run(args) -> int:
 
 def _sweep(args, data, common) -> None:
     """Run the chosen sweep, print its table, write CSV and plot (atomic)."""
-    import csv
-    import io
-
     import numpy as np
 
     from swingrt import sysid
-    from swingrt._io import write_text_atomic
+    from swingrt.io.atomic import write_text_atomic
+    from swingrt.reports import csv_text, plot_sample_time, plot_training_length
 
     out = Path(args.plots or ".")
     t = np.asarray(data["t"], dtype=float)
@@ -123,38 +122,16 @@ def _sweep(args, data, common) -> None:
     kw = {k: v for k, v in common.items() if k in ("method", "axes", "offset", "test_span")}
     if args.sweep == "length":
         rows = sysid.sweep_training_length(data, lengths, dt=args.dt, **kw)
-        sysid.plot_training_length(rows, out / "error_vs_training_length.png")
+        plot_training_length(rows, out / "error_vs_training_length.png")
     elif args.sweep == "noise":
         kw.pop("method", None)
         rows = sysid.sweep_noise(data, lengths, method=args.method, dt=args.dt, **kw)
-        sysid.plot_training_length(rows, out / "error_vs_training_length_noise.png")
+        plot_training_length(rows, out / "error_vs_training_length_noise.png")
     else:
         rows = sysid.sweep_sample_time(data, [0.01, 0.02, 0.03, 0.05, 0.08, 0.1], **kw)
-        _plot_dt(rows, out / "error_vs_sample_time.png")
+        plot_sample_time(rows, out / "error_vs_sample_time.png")
     keys = list(rows[0]) if rows else []
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=keys, lineterminator="\n")
-    w.writeheader()
-    w.writerows(rows)
-    write_text_atomic(out / f"sweep_{args.sweep}.csv", buf.getvalue())
-    print(buf.getvalue().replace(",", "\t"), end="")
+    text = csv_text(rows, keys)
+    write_text_atomic(out / f"sweep_{args.sweep}.csv", text)
+    print(text.replace(",", "\t"), end="")
     print(f"wrote {out / f'sweep_{args.sweep}.csv'}")
-
-
-def _plot_dt(rows, path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from swingrt._io import atomic_path
-
-    fig, ax = plt.subplots(figsize=(6, 4))
-    ax.plot([r["dt"] for r in rows], [r["nmae"] for r in rows], "o-")
-    ax.set_xlabel("sample time Ts [s]")
-    ax.set_ylabel("held-out NMAE")
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)

@@ -27,7 +27,7 @@ def run(args) -> int:
     import sys
     from pathlib import Path
 
-    from swingrt.experiment import Experiment, run_experiment
+    from swingrt.experiments import Experiment, run_experiment
 
     exp = Experiment(
         name="default-step",
@@ -39,14 +39,15 @@ def run(args) -> int:
     out = Path(args.out)
     # The double descent of thesis 4.6.8 on this very training flight.
     from swingrt import sysid
-    from swingrt.trace import Trace
+    from swingrt.io.flight import Trace
+    from swingrt.reports import plot_training_length
 
     train = Trace.from_parquet(out / "default-step__training.parquet")
     if not args.quiet:
         print("[ identification ] error vs training length", file=sys.stderr, flush=True)
     lengths = [float(x) for x in range(20, 261, 20)]
     sweep = sysid.sweep_training_length(train, lengths)
-    sysid.plot_training_length(sweep, out / "error_vs_training_length.png")
+    plot_training_length(sweep, out / "error_vs_training_length.png")
     print((out / "metrics.md").read_text(encoding="utf-8"))
     pid = next(r for r in rows if r["controller"] == "pid")
     mpc = next((r for r in rows if r["controller"] == "mpc"), None)

@@ -9,7 +9,7 @@ import argparse
 import logging
 import sys
 
-from swingrt.errors import ConfigError, SimulationError
+from swingrt.errors import ConfigError
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -52,21 +52,17 @@ def run(args) -> int:
         raise ConfigError(f"--system-id must be 1..255, not {args.system_id}")
     if not (args.offboard_loss > 0):
         raise ConfigError(f"--offboard-loss must be positive, not {args.offboard_loss}")
-    import swingrt
-
-    simulator = getattr(swingrt, "Simulator", None)
-    if simulator is None:
-        raise SimulationError("this build of swingrt has no simulator (swingrt.Simulator)")
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
     from swingrt.mavlink.vehicle import run_vehicle
+    from swingrt.scenario import resolve
+    from swingrt.sim import Simulator
 
     # The vehicle is commanded over MAVLink only: a setpoint schedule in the scenario would
     # fight the offboard node, so it is dropped (the vehicle starts holding its start point).
-    # (That is the built-in "hover" scenario: the "step" one without its schedule.)
-    scenario = swingrt.resolve_scenario(args.scenario, default="step")
+    duration = float(args.duration) if args.duration is not None else 3600.0
+    scenario = resolve(args.scenario, default="hover", duration=duration)
     scenario["setpoints"] = []
-    scenario["duration"] = float(args.duration) if args.duration is not None else 3600.0
-    sim = simulator(scenario)
+    sim = Simulator(scenario)
     run_vehicle(
         sim,
         args.listen or ["udp:127.0.0.1:14540"],

@@ -41,7 +41,9 @@ from pathlib import Path
 
 import numpy as np
 
-from swingrt.errors import ConfigError, ControlError, LinkError, SwingrtError
+from swingrt._core import Mpc
+from swingrt.errors import ConfigError, ControlError, FlightAbort, LinkError
+from swingrt.io.flight import write_columns
 from swingrt.mavlink.link import (
     PX4_MAIN_MODE,
     PX4_SUB_MODE_AUTO,
@@ -64,7 +66,6 @@ __all__ = [
     "OffboardSession",
     "fly",
     "load_controller",
-    "PDSwingDamper",
 ]
 
 log = logging.getLogger("swingrt.mavlink.offboard")
@@ -80,10 +81,6 @@ HOLD_MODES = {
     "posctl": (PX4_MAIN_MODE["POSCTL"], 0),
 }
 OFFBOARD_MAIN = PX4_MAIN_MODE["OFFBOARD"]
-
-
-class FlightAbort(SwingrtError, RuntimeError):
-    """The flight was handed back to the flight controller early; the message says why."""
 
 
 # ----------------------------------------------------------------------------- mission
@@ -291,7 +288,7 @@ class FlightReport:
 
 # ----------------------------------------------------------------------------- session
 
-#: Columns the node logs: DESIGN section 2 trace columns + loop timing.
+#: Columns the node logs: the trace columns (:data:`swingrt.io.TRACE_COLUMNS`) + loop timing.
 NODE_COLUMNS = (
     "t", "pn", "pe", "pd", "vn", "ve", "vd", "roll", "pitch", "yaw", "swing_n", "swing_e",
     "swing_rate_n", "swing_rate_e", "acc_sp_n", "acc_sp_e", "acc_sp_d", "vel_sp_n",
@@ -450,8 +447,9 @@ class OffboardSession:
                 self._drain()
                 mono = time.monotonic()
                 reason = self.watchdog.check_inputs(self.tel, mono)
-                if reason is None and self.tel.seen_offboard and self.tel.mode[0] != OFFBOARD_MAIN:
-                    reason = f"vehicle left OFFBOARD (now {mode_name(*self.tel.mode)})"
+                mode = self.tel.mode  # set with seen_offboard, from the first HEARTBEAT
+                if reason is None and self.tel.seen_offboard and mode and mode[0] != OFFBOARD_MAIN:
+                    reason = f"vehicle left OFFBOARD (now {mode_name(*mode)})"
                 if reason is not None:
                     aborted = f"{reason} at t = {k * self.ts:.2f} s"
                     break
@@ -561,29 +559,6 @@ class OffboardSession:
 # ----------------------------------------------------------------------------- controllers
 
 
-class PDSwingDamper:
-    """A simple velocity-tracking + swing-damping law, a stand-in controller for tests.
-
-    a = kv (v_ref - v) + kθ θ + kω θ̇  per axis (accelerating towards the payload's side damps
-    the linear pendulum θ̈ = -(g/l) θ - a/l); not the thesis's controller (that is the MPC).
-    """
-
-    def __init__(self, kv: float = 1.0, k_swing: float = 0.0, k_rate: float = 2.0):
-        self.kv, self.k_swing, self.k_rate = kv, k_swing, k_rate
-
-    def reset(self, state, acc) -> None:
-        """No internal state."""
-
-    def step(self, state: np.ndarray, vel_ref: np.ndarray) -> np.ndarray:
-        """Acceleration setpoints (axes,) for state rows [v, swing, swing_rate]."""
-        s = np.asarray(state, dtype=float)
-        return (
-            self.kv * (np.asarray(vel_ref) - s[:, 0])
-            + self.k_swing * s[:, 1]
-            + self.k_rate * s[:, 2]
-        )
-
-
 def load_controller(model_path, settings=None):
     """Build the MPC (``swingrt._core.Mpc``) from a model JSON file; returns (ctrl, ts, axes)."""
     p = Path(model_path)
@@ -604,11 +579,11 @@ def load_controller(model_path, settings=None):
     axes = len(inputs)
     if axes not in (1, 2):
         raise ConfigError(f"{p}: model has {axes} inputs; fly supports 1 (North) or 2 (N, E)")
-    try:
-        from swingrt._core import Mpc
-    except ImportError:
-        raise ControlError("this build of swingrt has no MPC (swingrt._core.Mpc)") from None
     return Mpc(text, settings), ts, axes
+
+
+#: P gain [1/s] of the East velocity hold while a one-axis controller flies North.
+EAST_HOLD_GAIN = 1.0
 
 
 def fly(
@@ -625,7 +600,7 @@ def fly(
     """Fly ``mission`` with ``controller`` (any object with ``step``/``reset``) over ``conn``.
 
     With one axis the controller flies North and East is held by a velocity P law
-    (a_e = -1.0 ve), since PX4 needs North and East setpoints of the same kind.
+    (a_e = -:data:`EAST_HOLD_GAIN` ve), since PX4 needs North and East setpoints of the same kind.
     Raises :class:`FlightAbort` (after handing back) when a watchdog fires; the trace and
     timing are written to ``log_path`` in any case.
     """
@@ -656,7 +631,11 @@ def fly(
         if a.shape != (axes,) or not np.all(np.isfinite(a)):
             raise ControlError(f"controller returned {a!r}, expected {axes} finite values")
         an = float(np.clip(a[0], -acc_limit, acc_limit))
-        ae = float(np.clip(a[1], -acc_limit, acc_limit)) if axes == 2 else -1.0 * tel.vel[1]
+        ae = (
+            float(np.clip(a[1], -acc_limit, acc_limit))
+            if axes == 2
+            else -EAST_HOLD_GAIN * tel.vel[1]
+        )
         return (
             MASK_ACC_ALT_HOLD,
             (0.0, 0.0, session.alt_hold),
@@ -672,8 +651,6 @@ def fly(
 
 def _finish(report: FlightReport, log_path) -> None:
     if log_path is not None:
-        from swingrt.data import write_columns
-
         write_columns(report.columns, log_path)
     log.info("loop: %s", report.summary())
     if report.aborted:

@@ -45,6 +45,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from swingrt.errors import SetpointError
+from swingrt.io.flight import write_columns
 from swingrt.mavlink.link import (
     PX4_MAIN_MODE,
     PX4_SUB_MODE_AUTO,
@@ -86,10 +88,6 @@ DEFAULT_STREAMS = {
     mavlink.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: 0.02,
     mavlink.MAVLINK_MSG_ID_DEBUG_VECT: 0.02,
 }
-
-
-class SetpointError(ValueError):
-    """A SET_POSITION_TARGET_LOCAL_NED that PX4 would not accept; the message says why."""
 
 
 def parse_setpoint(msg) -> dict[str, tuple[str, float]]:
@@ -525,13 +523,9 @@ def run_vehicle(
         for sig, handler in previous.items():
             signal.signal(sig, handler)
         if log_path is not None:
-            from swingrt.data import write_columns
-
             trace = sim.trace()
-            if str(log_path).lower().endswith(".parquet") and hasattr(trace, "to_parquet"):
-                trace.to_parquet(log_path)  # atomic; keeps the trace's metadata
-            else:
-                write_columns(dict(trace.columns), log_path)
+            # Parquet keeps the trace's metadata (the scenario) when it has any.
+            write_columns(trace.columns, log_path, meta=getattr(trace, "meta", None))
             log.info("sitl: trace written to %s", log_path)
         for c in conns:
             c.close()

@@ -65,7 +65,7 @@ def collect_over_mavlink(
 ):
     """Fly the random-step mission over ``url`` and write the record to ``out``.
 
-    ``out`` is ``.parquet`` or ``.csv`` (DESIGN section 2 columns, ``acc_sp_*`` = PX4's
+    ``out`` is ``.parquet`` or ``.csv`` (trace columns, ``acc_sp_*`` = PX4's
     acceleration setpoint, ``vel_sp_*`` = the commanded velocity) written atomically, also
     when a watchdog ends the flight early (then :class:`FlightAbort` is raised after).
     Returns the :class:`FlightReport`.

@@ -1,39 +1,42 @@
 """Experiment runner: training flight → identification → PID / LQR / MPC on a step → report.
 
-Writes to the output folder: ``metrics.csv`` (columns of issue 4), ``metrics.md``, one
-Parquet trace per run named ``<scenario>__<controller>.parquet``, per-scenario PNG figures
-(velocity, swing angle and acceleration setpoint against time, controllers overlaid, as the
-thesis's figures 5.11–5.22), the identified models, and for the double pendulum the MPC's
-predicted trajectory at the step against the one flown (figures 5.20–5.21).
+Writes to the output folder: ``metrics.csv`` (columns :data:`swingrt.reports.CSV_COLUMNS`),
+``metrics.md``, one Parquet trace per run named ``<scenario>__<controller>.parquet``,
+per-scenario PNG figures (velocity, swing angle and acceleration setpoint against time,
+controllers overlaid, as the thesis's figures 5.11–5.22), the identified models, and for
+the double pendulum the MPC's predicted trajectory at the step against the one flown
+(figures 5.20–5.21).
 """
 
 from __future__ import annotations
 
 import copy
-import csv
-import io
 import itertools
 import json
-import math
 import os
 import sys
 import time
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
+from importlib.resources.abc import Traversable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from swingrt._io import atomic_path, write_text_atomic
 from swingrt.errors import ConfigError
-from swingrt.metrics import METRICS, step_metrics, swing_iae_floor
+from swingrt.io.flight import Trace
+from swingrt.metrics import step_metrics, swing_iae_floor
+from swingrt.reports import plot_case, plot_prediction, write_metrics
 from swingrt.scenario import _merge, builtin, read_toml, resolve
-from swingrt.trace import Trace
 
-#: Columns of ``metrics.csv``.
-CSV_COLUMNS = ("scenario", "controller", *METRICS)
+
+def _defs() -> Traversable:
+    """The folder of built-in experiment definitions (``swingrt/experiments/defs/*.toml``)."""
+    return resources.files("swingrt.experiments").joinpath("defs")
+
+
 _KNOWN_KEYS = {
     "name",
     "description",
@@ -98,7 +101,7 @@ class Experiment:
 def list_experiments() -> dict[str, str]:
     """Built-in experiment names and descriptions."""
     out = {}
-    for f in sorted(resources.files("swingrt.experiments").iterdir(), key=lambda p: p.name):
+    for f in sorted(_defs().iterdir(), key=lambda p: p.name):
         if f.name.endswith(".toml"):
             d = tomllib.loads(f.read_text(encoding="utf-8"))
             out[d["name"]] = d.get("description", "")
@@ -110,7 +113,7 @@ def load_experiment(name_or_path: str) -> Experiment:
     p = Path(name_or_path)
     if name_or_path.endswith(".toml") or p.is_file():
         return Experiment.from_dict(read_toml(p), str(p))
-    f = resources.files("swingrt.experiments") / f"{name_or_path}.toml"
+    f = _defs() / f"{name_or_path}.toml"
     if not f.is_file():
         names = ", ".join(list_experiments())
         raise ConfigError(f"unknown experiment {name_or_path!r} (built in: {names})")
@@ -205,7 +208,7 @@ class _Log:
             print(f"[{time.perf_counter() - self.t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
 
-def fly(
+def simulate_controller(
     scenario: dict[str, Any],
     controller: str,
     *,
@@ -266,7 +269,8 @@ def identify_case(
 ) -> tuple[Any, Any, dict[str, float]]:
     """DMDc (with search) for the MPC, white-box estimates for the LQR; with ``plots`` the
     search's error-vs-q plot (the Pareto elbow) is written there."""
-    from swingrt.sysid import identify, plot_pareto, search, select_for_control
+    from swingrt.reports import plot_pareto
+    from swingrt.sysid import identify, search, select_for_control
 
     opts = dict(exp.identify)
     if opts.pop("search", True) and "delays" not in opts:
@@ -318,7 +322,7 @@ def run_experiment(
         prediction = None
         for ctrl in exp.controllers:
             log(f"{exp.name} [{i}/{len(all_cases)}] {case}: {ctrl}")
-            trace, extras = fly(
+            trace, extras = simulate_controller(
                 ev_sc,
                 ctrl,
                 axes=exp.axes,
@@ -368,97 +372,3 @@ def run_experiment(
     write_metrics(out, exp, rows, notes)
     log(f"{exp.name}: wrote {out}")
     return rows
-
-
-def _fmt(v: Any) -> str:
-    if isinstance(v, float):
-        return "inf" if math.isinf(v) else f"{v:.4g}"
-    return str(v)
-
-
-def write_metrics(out: Path, exp: Experiment, rows: list[dict[str, Any]], notes: list[str]):
-    """``metrics.csv`` and ``metrics.md`` (atomic)."""
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=CSV_COLUMNS, lineterminator="\n")
-    w.writeheader()
-    for r in rows:
-        w.writerow({k: _fmt(r[k]) for k in CSV_COLUMNS})
-    write_text_atomic(out / "metrics.csv", buf.getvalue())
-    md = [f"# {exp.name}", "", exp.description, ""]
-    md.append("| " + " | ".join(CSV_COLUMNS) + " |")
-    md.append("|" + "---|" * len(CSV_COLUMNS))
-    for r in rows:
-        md.append("| " + " | ".join(_fmt(r[k]) for k in CSV_COLUMNS) + " |")
-    if notes:
-        md += ["", "## Notes", ""] + [f"- {n}" for n in notes]
-    write_text_atomic(out / "metrics.md", "\n".join(md) + "\n")
-
-
-_STYLE = {"pid": ("tab:gray", "PX4 PID"), "lqr": ("tab:blue", "LQR"), "mpc": ("tab:red", "MPC")}
-
-
-def plot_case(path: Path, title: str, traces: dict[str, Trace], axes: str) -> None:
-    """Velocity, swing angle and acceleration setpoint against time, controllers overlaid."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    names = ["n"] if axes == "n" else ["n", "e"]
-    fig, ax = plt.subplots(3, len(names), figsize=(7 * len(names), 8), sharex=True, squeeze=False)
-    for j, a in enumerate(names):
-        for ctrl, tr in traces.items():
-            color, label = _STYLE.get(ctrl, (None, ctrl))
-            t = tr.t
-            ax[0, j].plot(t, tr[f"v{a}"], color=color, label=label)
-            ax[1, j].plot(t, np.degrees(tr[f"swing_{a}"]), color=color, label=label)
-            ax[2, j].plot(t, tr[f"acc_sp_{a}"], color=color, label=label)
-        some = next(iter(traces.values()))
-        ax[0, j].plot(some.t, some[f"vel_sp_{a}"], "k--", lw=0.8, label="setpoint")
-        ax[0, j].set_ylabel(f"v_{a.upper()} [m/s]")
-        ax[1, j].set_ylabel(f"swing_{a} [deg]")
-        ax[2, j].set_ylabel(f"acc_sp_{a} [m/s²]")
-        ax[2, j].set_xlabel("t [s]")
-        for k in range(3):
-            ax[k, j].grid(alpha=0.3)
-        ax[0, j].legend(loc="lower right")
-    fig.suptitle(title)
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
-
-
-def plot_prediction(path: Path, prediction: dict[str, Any], flown: Trace, model) -> None:
-    """The MPC's predicted velocity and swing at the step against the flight actually flown.
-
-    The prediction is Np steps × axes × [v, swing rate, swing] (``MpcController``'s layout)
-    from the tick at ``prediction['t0']``, at the model's dt.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    outs = np.asarray(prediction["outputs"])
-    axes = len(model.inputs)
-    steps = len(outs) // (3 * axes)
-    pred = outs[: steps * 3 * axes].reshape(steps, axes, 3)
-    tp = prediction["t0"] + model.dt * np.arange(1, steps + 1)
-    mask = (flown.t >= tp[0] - model.dt) & (flown.t <= tp[-1])
-    fig, ax = plt.subplots(2, 1, figsize=(7, 5.6), sharex=True)
-    ax[0].plot(flown.t[mask], flown["vn"][mask], "k", label="flown")
-    ax[0].plot(tp, pred[:, 0, 0], "tab:red", ls="--", label="MPC prediction")
-    ax[0].set_ylabel("v_N [m/s]")
-    ax[1].plot(flown.t[mask], np.degrees(flown["swing_n"][mask]), "k", label="flown")
-    ax[1].plot(tp, np.degrees(pred[:, 0, 2]), "tab:red", ls="--", label="MPC prediction")
-    ax[1].set_ylabel("swing_n [deg]")
-    ax[1].set_xlabel("t [s]")
-    for a in ax:
-        a.grid(alpha=0.3)
-    ax[0].legend()
-    fig.suptitle(f"MPC prediction at t = {prediction['t0']:.2f} s vs flown")
-    fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)

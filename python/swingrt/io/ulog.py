@@ -1,0 +1,261 @@
+"""PX4 ULog logs in: :func:`load_ulog` (used by :func:`swingrt.io.flight.load_flight`).
+
+PX4 ULog mapping (uORB topics, timestamps in microseconds):
+
+==========================================  ==============================================
+``vehicle_local_position``                  ``pn pe pd`` <- ``x y z``; ``vn ve vd`` <- ``vx vy vz``
+``vehicle_local_position_setpoint``         ``acc_sp_*`` <- ``acceleration[0..2]`` (PX4 >= 1.11)
+                                            or ``acc_x acc_y acc_z`` (older firmware);
+                                            ``vel_sp_*`` <- ``vx vy vz``;
+                                            ``thrust`` <- ``|thrust[0..2]|`` (normalised)
+``vehicle_attitude``                        ``roll pitch yaw`` <- ``q[0..3]`` (scalar first,
+                                            body FRD -> NED), Euler ZYX
+swing sensor (configurable, see below)      ``swing_n swing_e`` = scale * raw + offset
+==========================================  ==============================================
+
+Timeline: each topic keeps its own timestamps. Everything is merged onto the timeline of
+``vehicle_local_position`` (the state estimate, the densest topic the identification needs),
+cropped to the span where every loaded topic has samples, by linear interpolation of each
+topic in its own time. Attitude is interpolated as a quaternion (sign-continuous, then
+normalised) so that yaw does not jump at +-pi. A topic that falls silent for longer than
+``max(0.5 s, 10 x its median period)`` leaves NaN inside the hole instead of a straight
+line, so that :func:`require` reports the gap with its time.
+
+Swing sensor: ``ulog_swing = {"topic": "debug_vect", "name": "SWING", "n": "x", "e": "y",
+"scale": 1.0, "offset": 0.0}`` (the default; ``name`` filters the rows of a ``debug_vect``
+topic by its ``name`` field, our DEBUG_VECT convention documented in docs/flying.md).
+``scale``/``offset`` are the linear calibration of the sensor (thesis 6.1.2: ADC reading to
+angle by a best-fit straight line); a pair ``{"n": s, "e": s}`` sets them per axis.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+from swingrt.errors import DataError
+from swingrt.io.flight import Trace
+
+__all__ = ["DEFAULT_ULOG_SWING", "euler_to_quat", "load_ulog", "quat_to_euler"]
+
+#: Default swing-sensor source in a ULog: DEBUG_VECT rows named "SWING", x = swing_n, y = swing_e.
+DEFAULT_ULOG_SWING: dict = {
+    "topic": "debug_vect",
+    "name": "SWING",
+    "n": "x",
+    "e": "y",
+    "scale": 1.0,
+    "offset": 0.0,
+}
+
+
+def quat_to_euler(q0, q1, q2, q3):
+    """ZYX Euler angles (roll, pitch, yaw) of a scalar-first unit quaternion (body -> NED)."""
+    roll = np.arctan2(2.0 * (q0 * q1 + q2 * q3), 1.0 - 2.0 * (q1 * q1 + q2 * q2))
+    pitch = np.arcsin(np.clip(2.0 * (q0 * q2 - q3 * q1), -1.0, 1.0))
+    yaw = np.arctan2(2.0 * (q0 * q3 + q1 * q2), 1.0 - 2.0 * (q2 * q2 + q3 * q3))
+    return roll, pitch, yaw
+
+
+def euler_to_quat(roll, pitch, yaw):
+    """Scalar-first quaternion (q0, q1, q2, q3) of ZYX Euler angles (inverse of quat_to_euler)."""
+    cr, sr = np.cos(roll / 2), np.sin(roll / 2)
+    cp, sp = np.cos(pitch / 2), np.sin(pitch / 2)
+    cy, sy = np.cos(yaw / 2), np.sin(yaw / 2)
+    return (
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    )
+
+
+def _first_field(fields: Mapping[str, np.ndarray], *names: str):
+    for n in names:
+        if n in fields:
+            return n
+    return None
+
+
+def _decode_name(fields: Mapping[str, np.ndarray]) -> np.ndarray:
+    """Decode a ``char[N] name`` field (pyulog splits it into ``name[0]`` ... columns)."""
+    parts = []
+    i = 0
+    while f"name[{i}]" in fields:
+        parts.append(np.asarray(fields[f"name[{i}]"]).astype(np.uint8))
+        i += 1
+    if not parts:
+        return np.array([], dtype=object)
+    chars = np.stack(parts, axis=1)
+    return np.array([bytes(row).split(b"\0", 1)[0].decode("ascii", "replace") for row in chars])
+
+
+def _interp_topic(t_base: np.ndarray, t_src: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Linear interpolation of one topic onto the base timeline; NaN inside long silences."""
+    out = np.interp(t_base, t_src, y)
+    if len(t_src) > 2:
+        dt = np.diff(t_src)
+        limit = max(0.5, 10.0 * float(np.median(dt)))
+        for k in np.flatnonzero(dt > limit):
+            out[(t_base > t_src[k]) & (t_base < t_src[k + 1])] = np.nan
+    return out
+
+
+def load_ulog(p: Path, ulog_swing: Mapping | None = None) -> Trace:
+    """Read a PX4 ULog into trace columns on the local-position timeline (module doc)."""
+    try:
+        from pyulog import ULog
+    except ImportError:  # pragma: no cover - pyulog is a declared dependency
+        raise DataError(f"{p}: reading .ulg needs pyulog (pip install pyulog)", path=p) from None
+
+    swing = dict(DEFAULT_ULOG_SWING)
+    explicit_swing = ulog_swing is not None
+    if ulog_swing is not None:
+        unknown = set(ulog_swing) - set(DEFAULT_ULOG_SWING)
+        if unknown:
+            raise DataError(f"ulog_swing: unknown key(s) {', '.join(sorted(unknown))}")
+        swing.update(ulog_swing)
+        if ulog_swing.get("topic", "debug_vect") != "debug_vect" and "name" not in ulog_swing:
+            swing["name"] = None
+    try:
+        # Our own handle, so that it is closed when pyulog fails half-way through the file.
+        with open(p, "rb") as fh:
+            log = ULog(fh)
+    except Exception as exc:  # pyulog raises bare Exception / struct.error on bad files
+        raise DataError(f"{p}: not a readable ULog file ({exc})", path=p) from None
+
+    topics: dict[str, list] = {}
+    for d in log.data_list:
+        topics.setdefault(d.name, []).append(d)
+
+    def topic(name: str):
+        ds = topics.get(name)
+        if not ds:
+            return None
+        d = min(ds, key=lambda x: x.multi_id)  # instance 0 (the primary estimator/controller)
+        ts = np.asarray(d.data["timestamp"], dtype=np.float64)
+        order = np.argsort(ts, kind="stable")
+        fields = {k: np.asarray(v)[order] for k, v in d.data.items()}
+        return ts[order], fields
+
+    pos = topic("vehicle_local_position")
+    if pos is None:
+        raise DataError(
+            f"{p}: ULog has no vehicle_local_position topic (the state estimate)", path=p
+        )
+    t_pos, fpos = pos
+    if len(t_pos) < 2:
+        raise DataError(f"{p}: vehicle_local_position holds fewer than 2 samples", path=p)
+    for f in ("x", "y", "z", "vx", "vy", "vz"):
+        if f not in fpos:
+            raise DataError(f"{p}: vehicle_local_position has no field {f}", path=p)
+
+    # Collect every topic as (t_us, {column: values}) first, then crop and interpolate.
+    sources: list[tuple[np.ndarray, dict[str, np.ndarray]]] = []
+    notes: dict[str, str] = {}
+
+    sp = topic("vehicle_local_position_setpoint")
+    if sp is None:
+        for c in ("acc_sp_n", "acc_sp_e", "acc_sp_d", "vel_sp_n", "vel_sp_e", "vel_sp_d"):
+            notes[c] = "ULog has no vehicle_local_position_setpoint topic"
+    else:
+        t_sp, fsp = sp
+        cols: dict[str, np.ndarray] = {}
+        acc = [_first_field(fsp, f"acceleration[{i}]", f"acc_{a}") for i, a in enumerate("xyz")]
+        for c, f in zip(("acc_sp_n", "acc_sp_e", "acc_sp_d"), acc, strict=True):
+            if f is None:
+                notes[c] = (
+                    "vehicle_local_position_setpoint has neither acceleration[0..2] "
+                    "nor acc_x/acc_y/acc_z"
+                )
+            else:
+                cols[c] = fsp[f].astype(float)
+        for c, f in zip(("vel_sp_n", "vel_sp_e", "vel_sp_d"), ("vx", "vy", "vz"), strict=True):
+            if f in fsp:
+                cols[c] = fsp[f].astype(float)
+            else:
+                notes[c] = f"vehicle_local_position_setpoint has no field {f}"
+        if all(f"thrust[{i}]" in fsp for i in range(3)):
+            th = np.stack([fsp[f"thrust[{i}]"].astype(float) for i in range(3)])
+            cols["thrust"] = np.sqrt((th * th).sum(axis=0))
+        if cols:
+            sources.append((t_sp, cols))
+
+    att = topic("vehicle_attitude")
+    if att is None:
+        for c in ("roll", "pitch", "yaw"):
+            notes[c] = "ULog has no vehicle_attitude topic"
+    else:
+        t_att, fatt = att
+        if not all(f"q[{i}]" in fatt for i in range(4)):
+            raise DataError(f"{p}: vehicle_attitude has no field q[0..3]", path=p)
+        q = np.stack([fatt[f"q[{i}]"].astype(float) for i in range(4)])
+        # Sign continuity: q and -q are the same attitude; interpolate along the short path.
+        flip = np.cumsum(np.r_[0, (np.einsum("ij,ij->j", q[:, 1:], q[:, :-1]) < 0)]) % 2 == 1
+        q[:, flip] *= -1.0
+        sources.append((t_att, {f"_q{i}": q[i] for i in range(4)}))
+
+    st = topic(swing["topic"])
+    swing_why = None
+    if st is None:
+        swing_why = f"ULog has no {swing['topic']} topic (swing sensor)"
+    else:
+        t_sw, fsw = st
+        if swing.get("name"):
+            names = _decode_name(fsw)
+            if len(names) == 0:
+                swing_why = f"{swing['topic']} has no name field to select '{swing['name']}'"
+            else:
+                keep = names == swing["name"]
+                if not keep.any():
+                    swing_why = f"no {swing['topic']} rows named '{swing['name']}' (swing sensor)"
+                else:
+                    t_sw = t_sw[keep]
+                    fsw = {k: v[keep] for k, v in fsw.items()}
+        if swing_why is None:
+            cols = {}
+            for axis in ("n", "e"):
+                field = swing[axis]
+                if field not in fsw:
+                    swing_why = f"{swing['topic']} has no field {field} (swing_{axis})"
+                    break
+                scale = (
+                    swing["scale"][axis] if isinstance(swing["scale"], Mapping) else swing["scale"]
+                )
+                offset = (
+                    swing["offset"][axis]
+                    if isinstance(swing["offset"], Mapping)
+                    else swing["offset"]
+                )
+                cols[f"swing_{axis}"] = float(scale) * fsw[field].astype(float) + float(offset)
+            if swing_why is None:
+                sources.append((t_sw, cols))
+    if swing_why is not None:
+        if explicit_swing:
+            raise DataError(f"{p}: {swing_why}", path=p)
+        notes["swing_n"] = notes["swing_e"] = swing_why
+
+    # Crop the base timeline to where every loaded topic has data (no extrapolation).
+    lo = max([t_pos[0]] + [s[0][0] for s in sources])
+    hi = min([t_pos[-1]] + [s[0][-1] for s in sources])
+    keep = (t_pos >= lo) & (t_pos <= hi)
+    if keep.sum() < 2:
+        raise DataError(f"{p}: the logged topics do not overlap in time", path=p)
+    t_base = t_pos[keep]
+    out = Trace(source=str(p), notes=notes)
+    out["t"] = (t_base - t_base[0]) * 1e-6
+    pos_fields = zip(
+        ("pn", "pe", "pd", "vn", "ve", "vd"), ("x", "y", "z", "vx", "vy", "vz"), strict=True
+    )
+    for c, f in pos_fields:
+        out[c] = fpos[f][keep].astype(float)
+    for t_src, cols in sources:
+        for c, y in cols.items():
+            out[c] = _interp_topic(t_base, t_src, y)
+    if "_q0" in out:
+        q = np.stack([out.pop(f"_q{i}") for i in range(4)])
+        q /= np.linalg.norm(q, axis=0)
+        out["roll"], out["pitch"], out["yaw"] = quat_to_euler(*q)
+    return out
