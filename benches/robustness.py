@@ -68,7 +68,7 @@ def main() -> int:
                 pid, _ = simulate_controller(ev, "pid", axes=exp.axes)
                 ref = step_metrics(pid, t0=exp.step["t"], axis=axis)["swing_iae_deg_s"]
                 mpc, _ = simulate_controller(
-                    ev, "mpc", axes=exp.axes, model_json=model.to_json(), mpc_settings=settings
+                    ev, "mpc", axes=exp.axes, model=model, mpc_settings=settings
                 )
                 m = step_metrics(mpc, t0=exp.step["t"], axis=axis)
                 ratio = m["swing_iae_deg_s"] / ref

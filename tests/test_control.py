@@ -32,8 +32,7 @@ def test_mpc_damps_the_default_step_to_a_third_of_pid(default_models):
     model, lqr = default_models
     sc = resolve({"duration": 30.0}, default="step", seed=1)
     runs = {
-        c: simulate_controller(sc, c, model_json=model.to_json(), lqr_params=lqr)[0]
-        for c in ("pid", "lqr", "mpc")
+        c: simulate_controller(sc, c, model=model, lqr_params=lqr)[0] for c in ("pid", "lqr", "mpc")
     }
     m = {c: step_metrics(tr, t0=2.0) for c, tr in runs.items()}
     assert m["mpc"]["swing_iae_deg_s"] <= m["pid"]["swing_iae_deg_s"] / 3
@@ -50,14 +49,14 @@ def test_wind_step_has_no_steady_state_error_with_mpc(default_models):
         default="step",
         seed=2,
     )
-    tr, extras = simulate_controller(sc, "mpc", model_json=model.to_json())
+    tr, extras = simulate_controller(sc, "mpc", model=model)
     assert extras["fallback"] is None
     assert step_metrics(tr, t0=2.0)["ss_error"] <= 0.02
 
 
 def test_mpc_binding_steps_and_checks_its_inputs(default_models):
     model, _ = default_models
-    mpc = _core.Mpc(model.to_json(), {"horizon": 100, "control_horizon": 20})
+    mpc = _core.Mpc(model, {"horizon": 100, "control_horizon": 20})
     assert mpc.axes == 1 and mpc.period == pytest.approx(model.dt)
     state = np.array([[0.0, 0.0, 0.0]])
     mpc.reset(state, np.array([0.0]))
@@ -68,11 +67,11 @@ def test_mpc_binding_steps_and_checks_its_inputs(default_models):
     with pytest.raises(swingrt.errors.DataError):
         mpc.step(np.array([[np.nan, 0.0, 0.0]]), np.array([1.0]))
     with pytest.raises(ConfigError, match="horizon"):
-        _core.Mpc(model.to_json(), {"horizon": 0})
+        _core.Mpc(model, {"horizon": 0})
     with pytest.raises(ConfigError, match="settings.w_swnig"):
-        _core.Mpc(model.to_json(), {"w_swnig": 1.0})
+        _core.Mpc(model, {"w_swnig": 1.0})
     with pytest.raises(ModelError):
-        _core.Mpc("{}")
+        swingrt.LinearModel.from_json("{}")
 
 
 def test_riccati_bindings_solve_their_equations():
@@ -141,5 +140,33 @@ def test_controller_settings_errors_are_config_errors(default_models):
     model, _ = default_models
     sc = resolve({"duration": 5.0}, default="step")
     with pytest.raises(ConfigError, match="mpc.horizon"):
-        simulate_controller(sc, "mpc", model_json=model.to_json(), mpc_settings={"horizon": "long"})
+        simulate_controller(sc, "mpc", model=model, mpc_settings={"horizon": "long"})
     json.loads(model.to_json())  # the model itself stays valid
+
+
+def test_a_typo_in_an_experiment_fails_before_anything_flies(tmp_path, cli):
+    """Every section is checked by the core when the file is loaded: a misspelt field of
+    [identify], [mpc], [lqr] or a scenario section fails in well under a second with one line
+    naming the file and the dotted field."""
+    import time
+
+    from swingrt.experiments import load_experiment
+
+    for section, line, field in [
+        ("identify", "serch = true", "identify.serch"),
+        ("mpc", "horizn = 100", "mpc.horizn"),
+        ("lqr", "r = -1.0", "lqr.r"),
+        ("common.payload", "masss = 0.3", "payload.masss"),
+        ("training.wind", "velocity = [1.0, 0.0]", "wind.velocity"),
+    ]:
+        spec = tmp_path / f"{section}.toml"
+        spec.write_text(f'name = "typo"\n[{section}]\n{line}\n')
+        t0 = time.perf_counter()
+        with pytest.raises(ConfigError) as info:
+            load_experiment(str(spec))
+        assert time.perf_counter() - t0 < 1.0
+        assert str(spec) in str(info.value) and field in str(info.value), info.value
+        assert info.value.field is not None and info.value.field.endswith(field.split(".")[-1])
+    r = cli("experiment", tmp_path / "identify.toml")
+    assert r.returncode == 2 and "identify.serch" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr

@@ -498,8 +498,8 @@ def pure_simulation_iae(ctrl, axes: int, mission, ts: float) -> float:
     with the same state construction as the node (backward-difference swing rate)."""
     import swingrt
 
-    sc = swingrt.resolve_scenario(None)
-    sc["setpoints"] = []  # as ``swingrt sitl``: hold the start point until commanded
+    # As ``swingrt sitl``: hold the start point until commanded.
+    sc = swingrt.resolve_scenario(None).with_overrides({"setpoints": []})
     sim = swingrt.Simulator(sc)
     pd0 = sim.state()["pd"]
     sim.advance(2.0)  # the node's handshake: hover before engaging

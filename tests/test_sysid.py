@@ -147,12 +147,17 @@ def test_whitebox_model_on_its_own_dynamics():
 
 
 def test_whitebox_delay_form_matches_continuous_model_exactly():
-    m = json.loads(
-        _core.sysid_whitebox(
-            ["vn", "swing_n"], ["acc_sp_n"], payload_mass=0.3, length=0.8, dt=DT, friction=0.01
-        )
-    )
-    model = sysid.LinearModel.from_json(json.dumps(m))
+    settings = {
+        "method": "whitebox",
+        "payload_mass": 0.3,
+        "cable_length": 0.8,
+        "dt": DT,
+        "friction": 0.01,
+        "offset": "none",
+        "test_span": 0.0,
+    }
+    quiet = np.zeros((400, 2)), np.zeros((400, 1))
+    model, _ = _core.identify(*quiet, ["vn", "swing_n"], ["acc_sp_n"], settings)
     import scipy.linalg  # noqa: PLC0415
 
     g, mq, mp, length, c = 9.81, 0.952, 0.3, 0.8, 0.01
@@ -215,7 +220,7 @@ def test_nmae_hand_computed():
         "acc_sp_n": np.array([1.0, 2.0, 0.0, 1.0, 0.0]),
     }
     # Start 0 over 3 steps: predictions 1, 2.5, 1.25 → MAE 5/12, range 4 → 5/48.
-    res = sysid.evaluate(model, data, horizon=3.0, starts=1)
+    res = sysid.evaluate(model, data, rollout=3.0, starts=1)
     assert res["nmae"] == pytest.approx(5 / 48, abs=1e-15)
     assert res["per_state"]["vn"] == pytest.approx(5 / 48, abs=1e-15)
 
@@ -274,7 +279,7 @@ def test_to_statespace():
     control = pytest.importorskip("control")
     cols, a, b = _linear_flight(seed=8)
     m = sysid.identify(cols, delays=2)
-    ss = m.to_statespace()
+    ss = sysid.to_statespace(m)
     assert isinstance(ss, control.StateSpace)
     assert ss.dt == DT
     np.testing.assert_array_equal(ss.A, m.A)
@@ -348,14 +353,15 @@ def test_missing_column_and_short_data_are_data_errors():
 def test_binding_checks_shapes_and_dtypes():
     x = np.zeros((100, 2))
     u = np.zeros((100, 1))
+    fit = {"delays": 2, "test_span": 0.0}
     with pytest.raises(DataError, match="x must be a 2-D"):
-        _core.sysid_fit(x.astype(np.float32), u, ["a", "b"], ["c"], delays=2)
+        _core.identify(x.astype(np.float32), u, ["a", "b"], ["c"], fit)
     with pytest.raises(DataError, match="x must be a 2-D"):
-        _core.sysid_fit(np.zeros(100), u, ["a", "b"], ["c"], delays=2)
+        _core.identify(np.zeros(100), u, ["a", "b"], ["c"], fit)
     with pytest.raises(DataError, match="contiguous"):
-        _core.sysid_fit(np.zeros((2, 100)).T, u, ["a", "b"], ["c"], delays=2)
+        _core.identify(np.zeros((2, 100)).T, u, ["a", "b"], ["c"], fit)
     with pytest.raises(DataError, match="input samples"):
-        _core.sysid_fit(x, np.zeros((99, 1)), ["a", "b"], ["c"], delays=2)
+        _core.identify(x, np.zeros((99, 1)), ["a", "b"], ["c"], fit)
 
 
 def test_no_stable_candidate_is_identification_error():
@@ -521,7 +527,7 @@ def test_select_for_control_rejects_the_nmae_best_model_that_cannot_fly():
     assert (sel["delays"], sel["rank"]) == (picked.model.delays, picked.model.rank)
     flown = {}
     for name, m in [("nmae_best", result.model), ("selected", picked.model)]:
-        trace, _ = simulate_controller(ev, "mpc", model_json=m.to_json())
+        trace, _ = simulate_controller(ev, "mpc", model=m)
         flown[name] = step_metrics(trace, t0=2.0)
     assert flown["selected"]["ss_error"] < 0.02, flown
     assert math.isfinite(flown["selected"]["v_settle_s"]), flown

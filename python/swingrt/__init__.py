@@ -11,6 +11,7 @@ from swingrt import errors
 from swingrt._core import __version__
 from swingrt.io.flight import Trace
 from swingrt.metrics import step_metrics
+from swingrt.scenario import Scenario
 from swingrt.scenario import resolve as resolve_scenario
 from swingrt.sim import Simulator, collect, simulate
 from swingrt.sysid import LinearModel, evaluate, identify
@@ -19,6 +20,7 @@ __all__ = [
     "__version__",
     "errors",
     "LinearModel",
+    "Scenario",
     "Simulator",
     "Trace",
     "collect",

@@ -1,15 +1,41 @@
 """Type stubs of the Rust extension ``swingrt._core`` (checked by ``stubtest`` in CI)."""
 
 import os
-from typing import Any
+from typing import Any, Self, final
 
 import numpy as np
 import numpy.typing as npt
 
 __version__: str
+__all__ = [
+    "LinearModel",
+    "Lqr",
+    "Mpc",
+    "Scenario",
+    "Search",
+    "Simulator",
+    "__version__",
+    "care",
+    "check_settings",
+    "dare",
+    "evaluate",
+    "identify",
+    "mpc_step_check",
+    "mpc_tick_timing",
+    "pendulum_model",
+    "select_for_control",
+    "sim_real_time_factor",
+    "sysid_cable_length",
+    "sysid_fft_peak",
+    "sysid_rls_mass",
+    "sysid_smooth_gaussian",
+    "sysid_smooth_quadratic",
+    "whitebox_payload_mass",
+]
 
 # --- simulation -----------------------------------------------------------------------
 
+@final
 class Scenario:
     @staticmethod
     def builtin(name: str = "step") -> Scenario: ...
@@ -37,8 +63,9 @@ class Scenario:
 
 def sim_real_time_factor(scenario: Scenario, seconds: float) -> float: ...
 
+@final
 class Simulator:
-    def __init__(self, scenario: Scenario) -> None: ...
+    def __new__(cls, scenario: Scenario) -> Self: ...
     @property
     def t(self) -> float: ...
     @property
@@ -66,6 +93,7 @@ class Simulator:
 
 # --- system identification ---------------------------------------------------------------
 
+@final
 class LinearModel:
     @staticmethod
     def from_json(text: str) -> LinearModel: ...
@@ -108,12 +136,13 @@ class LinearModel:
     def predict(self, history: Any, inputs: Any) -> npt.NDArray[np.float64]: ...
     def __reduce__(self) -> tuple[Any, tuple[str]]: ...
 
+@final
 class Search:
     def table(self) -> list[dict[str, Any]]: ...
     @property
     def best(self) -> int: ...
 
-def identify_settings(settings: Any = None) -> dict[str, Any]: ...
+def check_settings(section: str, settings: Any = None) -> dict[str, Any]: ...
 def identify(
     x: npt.NDArray[np.float64],
     u: npt.NDArray[np.float64],
@@ -176,8 +205,9 @@ def sysid_smooth_gaussian(
 
 # --- control --------------------------------------------------------------------------
 
+@final
 class Mpc:
-    def __init__(self, model: LinearModel, settings: Any = None) -> None: ...
+    def __new__(cls, model: LinearModel, settings: Any = None) -> Self: ...
     @property
     def period(self) -> float: ...
     @property
@@ -190,8 +220,9 @@ class Mpc:
     def last_tick(self) -> dict[str, Any]: ...
     def settings(self) -> dict[str, Any]: ...
 
+@final
 class Lqr:
-    def __init__(self, params: Any, axes: int = 1, settings: Any = None) -> None: ...
+    def __new__(cls, params: Any, axes: int = 1, settings: Any = None) -> Self: ...
     @property
     def period(self) -> float: ...
     @property
@@ -210,16 +241,16 @@ def mpc_step_check(
     input_lags: list[float] = ...,
 ) -> list[dict[str, float]]: ...
 def care(
-    A: npt.NDArray[np.float64],
-    B: npt.NDArray[np.float64],
-    Q: npt.NDArray[np.float64],
-    R: npt.NDArray[np.float64],
+    a: npt.NDArray[np.float64],
+    b: npt.NDArray[np.float64],
+    q: npt.NDArray[np.float64],
+    r: npt.NDArray[np.float64],
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
 def dare(
-    A: npt.NDArray[np.float64],
-    B: npt.NDArray[np.float64],
-    Q: npt.NDArray[np.float64],
-    R: npt.NDArray[np.float64],
+    a: npt.NDArray[np.float64],
+    b: npt.NDArray[np.float64],
+    q: npt.NDArray[np.float64],
+    r: npt.NDArray[np.float64],
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
 def mpc_tick_timing(
     model: LinearModel,

@@ -15,7 +15,7 @@ from typing import Any
 
 from swingrt import _core
 from swingrt.io.flight import Trace
-from swingrt.scenario import ScenarioLike, resolve
+from swingrt.scenario import Scenario, ScenarioLike, resolve
 
 _MODES = {"pos", "vel", "acc"}
 _AXES = {"n": 0, "e": 1, "d": 2}
@@ -55,9 +55,7 @@ class Simulator:
 
     def __init__(self, config: ScenarioLike = None, *, default: str = "hover", **overrides: Any):
         self.scenario = resolve(config, default=default, **overrides)
-        import json
-
-        self._sim = _core.Simulator(json.dumps(self.scenario))
+        self._sim = _core.Simulator(self.scenario)
 
     @property
     def t(self) -> float:
@@ -89,21 +87,19 @@ class Simulator:
 
     def trace(self) -> Trace:
         """The trace logged so far."""
-        return Trace(self._sim.trace(), {"scenario": self.scenario})
+        return Trace(self._sim.trace(), {"scenario": self.scenario.to_dict()})
 
 
-def _run(scenario: dict[str, Any], progress: bool | None, label: str) -> Trace:
-    import json
-
-    sim = _core.Simulator(json.dumps(scenario))
-    bar = _Progress(scenario["duration"], label, progress)
+def _run(scenario: Scenario, progress: bool | None, label: str) -> Trace:
+    sim = _core.Simulator(scenario)
+    bar = _Progress(scenario.duration, label, progress)
     chunk = 5.0
     while sim.steps_left > 0:
-        sim.advance(min(chunk, sim.steps_left * scenario["physics_dt"]))
+        sim.advance(min(chunk, sim.steps_left * scenario.physics_dt))
         bar.update(sim.t)
     sim.run_to_end()
     bar.close()
-    return Trace(sim.take_trace(), {"scenario": scenario})
+    return Trace(sim.take_trace(), {"scenario": scenario.to_dict()})
 
 
 def simulate(

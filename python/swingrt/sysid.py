@@ -1,8 +1,8 @@
 """System identification from flight data (thesis chapter 4).
 
 ``identify`` turns a flight (a :class:`swingrt.Trace`, or any mapping of numpy columns
-named as in :data:`swingrt.io.TRACE_COLUMNS`) into a
-:class:`LinearModel` over delay coordinates, z_{k+1} = A z_k + B (u_k - input_mean) + c with
+named as in :data:`swingrt.io.TRACE_COLUMNS`) into a :class:`LinearModel` over delay
+coordinates, z_{k+1} = A z_k + B (u_k - input_mean) + c with
 z_k = [x_k; x_{k-1}; ...; x_{k-q+1}] (newest first):
 
 * ``dmdc``    DMDc with delay coordinates (eq. 4.9-4.15), rank-p truncated SVD;
@@ -11,42 +11,40 @@ z_k = [x_k; x_{k-1}; ...; x_{k-q+1}] (newest first):
   the FFT peak of the swing (eq. 4.8, frequency in Hz) and the payload mass from RLS on hover
   thrust (section 4.3.2).
 
-The data are resampled linearly onto a uniform grid of ``dt`` (default 0.03 s). The first
-``test_span`` seconds (default 40 s) are held out for scoring; models are trained on the
-rest (section 4.6.1). ``evaluate`` scores a model by the k-step rollout NMAE of section 4.6.2
-(10 start points, 20 s horizon, true inputs only). The numerics run in the Rust core
-(``swingrt._core``); this module prepares columns, splits and sweeps
-(figures are in :mod:`swingrt.reports.plots`).
+Every rule of identification lives in the Rust core: the settings with their defaults and
+checks (``_core.identify_settings``: the keyword arguments below are its fields), the
+held-out split, fit, search, scoring, white-box and the control-relevant selection. This
+module reads columns, resamples them onto the ``dt`` grid, smooths them when asked, and
+calls the core. Figures are in :mod:`swingrt.reports.plots`.
 """
 
 from __future__ import annotations
 
-import json
 import math
-import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from swingrt import _core
-from swingrt.errors import ConfigError, DataError, IdentificationError, ModelError
-from swingrt.io.atomic import write_text_atomic
+from swingrt.errors import ConfigError, DataError, IdentificationError
 
 __all__ = [
     "AXES",
     "LinearModel",
     "SearchResult",
+    "estimate_payload_mass",
     "evaluate",
     "identify",
+    "identify_settings",
     "resample",
     "search",
     "select_for_control",
     "sweep_noise",
     "sweep_sample_time",
     "sweep_training_length",
+    "to_statespace",
 ]
 
 #: State and input columns per axis choice.
@@ -55,131 +53,33 @@ AXES: dict[str, tuple[list[str], list[str]]] = {
     "ne": (["vn", "ve", "swing_n", "swing_e"], ["acc_sp_n", "acc_sp_e"]),
 }
 
-#: Vehicle mass of table 6.1 [kg].
-VEHICLE_MASS = 0.952
-GRAVITY = 9.81
-
-_METHODS = ("dmdc", "havokc", "whitebox")
-_OFFSETS = ("none", "mean", "affine")
-
-
-# --------------------------------------------------------------------------- model
+#: A discrete linear model over delay coordinates (``swingrt-model/1``), a core object:
+#: ``A``, ``B``, ``c`` (read-only numpy), ``dt``, ``delays``, ``rank``, ``states``,
+#: ``inputs``, ``offset``, ``input_mean``, ``method``, ``diagnostics``, ``predict()``,
+#: ``to_json()``/``from_json()``, ``save()``/``load()``.
+LinearModel = _core.LinearModel
 
 
-class LinearModel:
-    """A discrete linear model over delay coordinates (schema ``swingrt-model/1``).
-
-    Attributes mirror the JSON: ``A``, ``B``, ``c`` (numpy), ``dt`` [s], ``delays`` (q),
-    ``rank`` (p), ``states``, ``inputs``, ``offset``, ``input_mean``, ``method``,
-    ``fingerprint`` and ``diagnostics`` (a dict). ``search_table`` holds the scored
-    candidates when the model came from a search.
-    """
-
-    def __init__(self, text: str):
-        # The core validates dimensions and finiteness and adds the spectral radius.
-        self._json, _ = _core.sysid_check_model(text)
-        d = json.loads(self._json)
-        self.method: str = d["method"]
-        self.dt: float = float(d["dt"])
-        self.delays: int = int(d["delays"])
-        self.rank: int = int(d["rank"])
-        self.states: list[str] = list(d["states"])
-        self.inputs: list[str] = list(d["inputs"])
-        self.offset: str = d["offset"]
-        self.input_mean = np.asarray(d["input_mean"], dtype=float)
-        self.A = np.asarray(d["A"], dtype=float)
-        self.B = np.asarray(d["B"], dtype=float)
-        self.c = np.asarray(d["c"], dtype=float)
-        self.fingerprint: str = d.get("fingerprint", "")
-        self.diagnostics: dict[str, Any] = d.get("diagnostics", {})
-        self.search_table: list[dict[str, Any]] | None = None
-
-    def __repr__(self) -> str:
-        nm = self.diagnostics.get("test_nmae")
-        score = f", test NMAE {nm:.4f}" if isinstance(nm, (int, float)) else ""
-        return (
-            f"LinearModel({self.method}, q={self.delays}, p={self.rank}, "
-            f"states={self.states}, inputs={self.inputs}, dt={self.dt}{score})"
-        )
-
-    @property
-    def order(self) -> int:
-        """Dimension n*q of the stacked state."""
-        return len(self.states) * self.delays
-
-    @property
-    def spectral_radius(self) -> float:
-        """Largest eigenvalue modulus of ``A``."""
-        return float(self.diagnostics["spectral_radius"])
-
-    def predict(self, history: Any, inputs: Any) -> np.ndarray:
-        """Roll the model on from ``history`` (the last q state rows, oldest first, shape
-        (q, n)) under future ``inputs`` (shape (H, m)); returns the predicted (H, n) states
-        x_{k+1..k+H}."""
-        h = np.ascontiguousarray(np.asarray(history, dtype=float).reshape(self.delays, -1))
-        u = np.ascontiguousarray(np.asarray(inputs, dtype=float).reshape(-1, len(self.inputs)))
-        out = _core.sysid_predict(self._json, h, u)
-        return out.reshape(-1, len(self.states))
-
-    def to_json(self) -> str:
-        """The ``swingrt-model/1`` JSON text."""
-        return self._json
-
-    def save(self, path: str | os.PathLike[str]) -> None:
-        """Write the JSON atomically."""
-        write_text_atomic(path, self._json + "\n")
-
-    @classmethod
-    def from_json(cls, text: str) -> LinearModel:
-        """Parse and validate model JSON (``ModelError`` naming the problem)."""
-        if not isinstance(text, str):
-            raise ModelError("model JSON must be a string")
-        return cls(text)
-
-    @classmethod
-    def load(cls, path: str | os.PathLike[str]) -> LinearModel:
-        """Read a model file."""
-        p = Path(path)
-        if not p.is_file():
-            raise ModelError(f"{p}: no such model file")
-        try:
-            text = p.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ModelError(f"{p}: cannot read: {exc}") from None
-        try:
-            return cls(text)
-        except ModelError as exc:
-            raise ModelError(f"{p}: {exc}") from None
-
-    def to_statespace(self):
-        """The model as a discrete python-control ``StateSpace`` (outputs = newest states).
-
-        The input is u - input_mean; the affine term ``c`` is not representable in a
-        ``StateSpace`` and is returned separately by :meth:`affine_term`.
-        """
-        try:
-            import control
-        except ImportError as exc:  # pragma: no cover - depends on the environment
-            raise ModelError("to_statespace needs the python-control package") from exc
-        n = len(self.states)
-        C = np.zeros((n, self.order))
-        C[:, :n] = np.eye(n)
-        D = np.zeros((n, len(self.inputs)))
-        return control.ss(
-            self.A, self.B, C, D, self.dt, inputs=list(self.inputs), outputs=list(self.states)
-        )
-
-    def affine_term(self) -> np.ndarray:
-        """The constant ``c`` of the stacked state update."""
-        return self.c.copy()
+def identify_settings(**settings: Any) -> dict[str, Any]:
+    """The identification settings with every default filled in, checked by the core
+    (``ConfigError`` naming the field). ``None`` values mean "the default"."""
+    # None is "the default" except for ``fine``, where it means "no fine stage".
+    given = {k: v for k, v in settings.items() if v is not None or k == "fine"}
+    if isinstance(given.get("fine"), tuple):
+        given["fine"] = list(given["fine"])
+    if isinstance(given.get("swing_band"), tuple):
+        given["swing_band"] = list(given["swing_band"])
+    return _core.check_settings("identify", given)
 
 
 @dataclass
 class SearchResult:
-    """A search's selected model and every scored candidate."""
+    """A search's selected model, every scored candidate, and what selection needs."""
 
     model: LinearModel
     table: list[dict[str, Any]] = field(default_factory=list)
+    search: Any = None
+    settings: dict[str, Any] = field(default_factory=dict)
 
     def best_per_delay(self) -> list[dict[str, Any]]:
         """Lowest stable NMAE per q (the error-vs-q curve of figure 4.6)."""
@@ -213,7 +113,7 @@ def resample(
     column raises ``DataError`` naming the column and the time.
     """
     if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0):
-        raise ConfigError(f"dt must be a positive number of seconds, not {dt!r}")
+        raise ConfigError(f"dt: must be a positive number of seconds, not {dt!r}", field="dt")
     if "t" not in columns:
         raise DataError("data has no time column 't'")
     t = np.asarray(columns["t"], dtype=float)
@@ -246,145 +146,50 @@ def resample(
     return out
 
 
-def _check_choice(name: str, value: str, choices: Sequence[str]) -> None:
-    if value not in choices:
-        raise ConfigError(f"{name} must be one of {', '.join(choices)}, not {value!r}")
+def _axes(axes: str) -> tuple[list[str], list[str]]:
+    if axes not in AXES:
+        raise ConfigError(f"axes: must be one of {', '.join(AXES)}, not {axes!r}", field="axes")
+    return AXES[axes]
 
 
 def _prepare(
-    data: Any,
-    axes: str,
-    dt: float,
-    smooth: bool = False,
-    smooth_window: int = 20,
-    extra: Sequence[str] = (),
-) -> tuple[np.ndarray, np.ndarray, list[str], list[str], dict[str, np.ndarray]]:
-    _check_choice("axes", axes, tuple(AXES))
-    states, inputs = AXES[axes]
-    cols = resample(_columns(data), dt, names=[*states, *inputs, *extra])
+    data: Any, axes: str, settings: Mapping[str, Any]
+) -> tuple[np.ndarray, np.ndarray, list[str], list[str]]:
+    """Resampled (and, with ``smooth``, smoothed) state and input columns of ``axes``."""
+    states, inputs = _axes(axes)
+    cols = resample(_columns(data), settings["dt"], names=[*states, *inputs])
     x = np.column_stack([cols[s] for s in states])
     u = np.column_stack([cols[s] for s in inputs])
-    if smooth:
+    if settings["smooth"]:
         # Section 4.6.6: quadratic regression for states, Gaussian average for inputs.
-        x = np.column_stack(
-            [_core.sysid_smooth_quadratic(np.ascontiguousarray(c), smooth_window) for c in x.T]
-        )
-        u = np.column_stack(
-            [_core.sysid_smooth_gaussian(np.ascontiguousarray(c), smooth_window) for c in u.T]
-        )
-    return np.ascontiguousarray(x), np.ascontiguousarray(u), states, inputs, cols
-
-
-def _split(x: np.ndarray, u: np.ndarray, test_span: float, dt: float):
-    if not (math.isfinite(test_span) and test_span >= 0):
-        raise ConfigError(f"test_span must be >= 0 s, not {test_span}")
-    k = int(round(test_span / dt))
-    if k >= len(x):
-        raise DataError(
-            f"the data ({len(x) * dt:.1f} s) is not longer than the test span ({test_span} s)"
-        )
-    return (x[k:], u[k:]), (x[:k], u[:k])
-
-
-def _horizon_steps(horizon: float, dt: float) -> int:
-    if not (math.isfinite(horizon) and horizon > 0):
-        raise ConfigError(f"horizon must be a positive number of seconds, not {horizon}")
-    return max(1, int(round(horizon / dt)))
+        w = settings["smooth_window"]
+        x = np.column_stack([_core.sysid_smooth_quadratic(np.ascontiguousarray(c), w) for c in x.T])
+        u = np.column_stack([_core.sysid_smooth_gaussian(np.ascontiguousarray(c), w) for c in u.T])
+    return np.ascontiguousarray(x), np.ascontiguousarray(u), states, inputs
 
 
 # --------------------------------------------------------------------------- identify
 
 
-def _coarse_delays(q_max: int) -> list[int]:
-    return list(range(2, q_max + 1, 4))
-
-
 def search(
-    data: Any,
-    *,
-    method: str = "dmdc",
-    axes: str = "n",
-    offset: str = "affine",
-    dt: float = 0.03,
-    test_span: float = 40.0,
-    horizon: float = 20.0,
-    starts: int = 10,
-    delays: Sequence[int] | None = None,
-    rank_start: int = 5,
-    rank_step: int = 5,
-    fine: tuple[int, int] | None = (2, 4),
-    smooth: bool = False,
-    smooth_window: int = 20,
-    stability_tolerance: float = 1e-3,
+    data: Any, *, axes: str = "n", delays: Sequence[int] | None = None, **settings: Any
 ) -> SearchResult:
     """Grid (``fine=None``) or coarse->fine search over (q, p); selects on the first
-    ``test_span`` seconds, trains on the rest (section 4.6.3). ``delays`` defaults to
-    q = 2, 6, ..., 58 coarse, then unit steps within ``fine`` = (q radius, p radius)."""
-    _check_choice("method", method, ("dmdc", "havokc"))
-    _check_choice("offset", offset, _OFFSETS)
-    x, u, states, inputs, _ = _prepare(data, axes, dt, smooth, smooth_window)
-    (xtr, utr), (xte, ute) = _split(x, u, test_span, dt)
-    if len(xte) == 0:
-        raise ConfigError("a search needs a test span > 0 s")
-    h = _horizon_steps(horizon, dt)
-    qs = list(delays) if delays is not None else _coarse_delays(60)
-    text, rows, best = _core.sysid_search(
-        np.ascontiguousarray(xtr),
-        np.ascontiguousarray(utr),
-        np.ascontiguousarray(xte),
-        np.ascontiguousarray(ute),
-        states,
-        inputs,
-        method=method,
-        offset=offset,
-        dt=dt,
-        horizon=h,
-        starts=starts,
-        delays=qs,
-        rank_start=rank_start,
-        rank_step=rank_step,
-        rank_extra=1 if offset == "affine" else 0,
-        fine=tuple(fine) if fine else None,  # type: ignore[arg-type]  # a (q, p) pair
-        stability_tolerance=stability_tolerance,
-    )
-    table = [
-        {
-            "delays": q,
-            "rank": p,
-            "nmae": nm,
-            "per_state": {name: per[i] for i, name in enumerate(states)},
-            "stable": stable,
-            "spectral_radius": rho,
-        }
-        for (q, p, nm, per, stable, rho) in rows
-    ]
-    model = LinearModel(text)
-    model.search_table = table
-    model.diagnostics["selected"] = table[best]
-    return SearchResult(model=model, table=table)
+    ``test_span`` seconds, trains on the rest (section 4.6.3). ``delays`` are the coarse
+    grid's q (default 2, 6, ..., 58), then unit steps within ``fine`` = (q radius, p
+    radius). Other keywords are identification settings (:func:`identify_settings`)."""
+    if settings.get("method") == "whitebox":
+        raise ConfigError("method: search applies to dmdc and havokc", field="method")
+    grid = list(delays) if delays is not None else settings.get("search_delays")
+    rest = {k: v for k, v in settings.items() if k not in ("search", "search_delays")}
+    s = identify_settings(**rest, search=True, search_delays=grid)
+    x, u, states, inputs = _prepare(data, axes, s)
+    model, found = _core.identify(x, u, states, inputs, s)
+    table = found.table() if found is not None else []
+    return SearchResult(model=model, table=table, search=found, settings=s)
 
 
-def identify(
-    data: Any,
-    *,
-    method: str = "dmdc",
-    axes: str = "n",
-    delays: int | None = None,
-    rank: int | None = None,
-    offset: str = "affine",
-    search: bool = False,
-    dt: float = 0.03,
-    test_span: float = 40.0,
-    horizon: float = 20.0,
-    starts: int = 10,
-    smooth: bool = False,
-    smooth_window: int = 20,
-    payload_mass: float | None = None,
-    cable_length: float | None = None,
-    vehicle_mass: float = VEHICLE_MASS,
-    friction: float = 0.0,
-    swing_band: tuple[float, float] = (0.1, 3.0),
-) -> LinearModel:
+def identify(data: Any, *, axes: str = "n", **settings: Any) -> LinearModel:
     """Identify a model from a flight.
 
     ``method``: ``dmdc`` | ``havokc`` | ``whitebox``; ``axes``: ``n`` (``[vn, swing_n] <-
@@ -393,275 +198,107 @@ def identify(
     20) and ``rank`` (default full). The first ``test_span`` seconds are held out and the
     model's ``diagnostics['test_nmae']`` is its rollout NMAE there; ``test_span=0`` trains
     on everything. White-box: ``payload_mass`` from RLS on the ``thrust`` column unless
-    given, ``cable_length`` from the swing FFT peak unless given.
+    given, ``cable_length`` from the swing FFT peak unless given. Every keyword is a field of
+    :func:`identify_settings`.
     """
-    _check_choice("method", method, _METHODS)
-    _check_choice("offset", offset, _OFFSETS)
-    _check_choice("axes", axes, tuple(AXES))
-    if search and method == "whitebox":
-        raise ConfigError("search applies to dmdc and havokc, not whitebox")
-    if search:
-        if delays is not None or rank is not None:
-            raise ConfigError("give either search or delays/rank, not both")
-        res = globals()["search"](
-            data,
-            method=method,
-            axes=axes,
-            offset=offset,
-            dt=dt,
-            test_span=test_span,
-            horizon=horizon,
-            starts=starts,
-            smooth=smooth,
-            smooth_window=smooth_window,
-        )
-        return res.model
-    x, u, states, inputs, cols = _prepare(data, axes, dt, smooth, smooth_window)
-    (xtr, utr), (xte, ute) = _split(x, u, test_span, dt)
-    if method == "whitebox":
-        text = _whitebox(
-            data,
-            xtr,
-            utr,
-            states,
-            inputs,
-            dt,
-            offset,
-            payload_mass,
-            cable_length,
-            vehicle_mass,
-            friction,
-            swing_band,
-            test_span,
-        )
-    else:
-        q = 20 if delays is None else delays
-        if not isinstance(q, int) or q < 1:
-            raise ConfigError(f"delays must be a positive integer, not {delays!r}")
-        if rank is not None and (not isinstance(rank, int) or rank < 1):
-            raise ConfigError(f"rank must be a positive integer, not {rank!r}")
-        text = _core.sysid_fit(
-            np.ascontiguousarray(xtr),
-            np.ascontiguousarray(utr),
-            states,
-            inputs,
-            delays=q,
-            rank=rank,
-            offset=offset,
-            dt=dt,
-            method=method,
-        )
-    model = LinearModel(text)
-    if len(xte):
-        try:
-            score = _score(model, xte, ute, horizon, starts)
-            model = _with_diagnostics(model, test_nmae=score["nmae"])
-        except DataError:
-            pass  # test span too short for the horizon: no held-out score
+    s = identify_settings(**settings)
+    if s["search"]:
+        rest = {k: v for k, v in s.items() if k not in ("delays", "rank")}
+        return search(data, axes=axes, **rest).model
+    x, u, states, inputs = _prepare(data, axes, s)
+    mass = None
+    if s["method"] == "whitebox" and s["payload_mass"] is None:
+        mass = estimate_payload_mass(data, vehicle_mass=s["vehicle_mass"], skip=s["test_span"])
+    model, _ = _core.identify(x, u, states, inputs, s, payload_mass=mass)
     return model
-
-
-#: Closed-loop check bounds of :func:`select_for_control`, as fractions of the step.
-CONTROL_CHECK_BOUNDS = {"overshoot": 0.35, "final_error": 0.03, "hold_drift": 0.1}
 
 
 def select_for_control(
     data: Any,
     result: SearchResult,
     *,
-    method: str = "dmdc",
     axes: str = "n",
-    mpc_settings: dict[str, Any] | None = None,
+    mpc_settings: Mapping[str, Any] | None = None,
     candidates: int = 20,
     input_lags: Sequence[float] = (0.0, 0.1),
     vehicle_drag: Sequence[float] = (0.12,),
     step: float = 2.0,
     bounds: Mapping[str, float] | None = None,
-    **fit: Any,
+    **settings: Any,
 ) -> SearchResult:
-    """Pick from a search the model to fly an MPC on (control-relevant selection).
-
-    Rollout NMAE alone is a poor guide here: models within a few percent of the best can
-    carry spurious slow modes that the MPC's feedback excites (hover drift, a creep that
-    leaves the velocity 0.2-0.8 m/s short after 30 s, even divergence). The ``candidates``
-    stable (q, p) of lowest NMAE are refitted and, best NMAE first, the MPC designed on each
-    (``mpc_settings``) flies the white-box model of the same flight in closed loop, with
-    each of ``input_lags`` [s] between controller and plant
-    (:func:`swingrt._core.mpc_step_check`):
-    hover, a ``step`` m/s step, hold. The first whose every run stays within ``bounds``
-    (fractions of the step: ``overshoot``, ``final_error`` at 20 s, ``hold_drift``) is
-    selected; with none passing, the one that misses its bounds least, and it says so.
-    ``fit`` are the identification options the search used (``offset``, ``dt``,
-    ``test_span``...). The outcome is in ``model.diagnostics['control_check']``.
-    """
-    limits = dict(CONTROL_CHECK_BOUNDS)
-    if bounds:
-        unknown = set(bounds) - set(limits)
-        if unknown:
-            raise ConfigError(f"unknown control-check bound(s) {sorted(unknown)}")
-        limits.update(bounds)
-    if candidates < 1:
-        raise ConfigError(f"candidates must be >= 1, not {candidates}")
-    if not input_lags:
-        raise ConfigError("input_lags needs at least one lag (0 = none)")
-    fit = {k: v for k, v in fit.items() if k not in ("delays", "rank", "search")}
-    plant = identify(data, method="whitebox", axes=axes, dt=fit.get("dt", 0.03))
-    plants = [plant.to_json()] + [_with_vehicle_drag(plant, k) for k in vehicle_drag]
-    rows = sorted(
-        (r for r in result.table if r["stable"] is True),
-        key=lambda r: r["nmae"],
-    )[:candidates]
-    checked: list[dict[str, Any]] = []
-    chosen = None
-    for row in rows:
-        q, p = row["delays"], row["rank"]
-        if (q, p) == (result.model.delays, result.model.rank):
-            model = result.model
-        else:
-            model = identify(data, method=method, axes=axes, delays=q, rank=p, **fit)
-        runs = _core.mpc_step_check(
-            model.to_json(), plants, mpc_settings or None, step=step, input_lags=list(input_lags)
-        )
-        worst = {k: max(r[k] for r in runs) for k in limits}
-        ok = all(worst[k] <= limits[k] for k in limits)
-        checked.append({"delays": q, "rank": p, "nmae": row["nmae"], "passed": ok, **worst})
-        if ok:
-            chosen = model
-            break
-    passed = chosen is not None
-    if chosen is None:
-        # None passes: the one that misses its bounds least (ratio to the bound), refitted.
-        least = min(checked, key=lambda c: max(c[k] / limits[k] for k in limits))
-        if (least["delays"], least["rank"]) == (result.model.delays, result.model.rank):
-            chosen = result.model
-        else:
-            chosen = identify(
-                data, method=method, axes=axes, delays=least["delays"], rank=least["rank"], **fit
-            )
-    picked = _with_diagnostics(
-        chosen,
-        selected=next(
-            (r for r in result.table if (r["delays"], r["rank"]) == (chosen.delays, chosen.rank)),
-            result.model.diagnostics.get("selected", {}),
-        ),
-        control_check={
-            "plant": "whitebox",
-            "input_lags": list(input_lags),
-            "vehicle_drag": list(vehicle_drag),
-            "step": step,
-            "bounds": limits,
-            "passed": passed,
-            "checked": checked,
-        },
+    """Pick from a search the model to fly an MPC on (control-relevant selection, see
+    ``swing_core::control::selection``): the ``candidates`` stable (q, p) of lowest NMAE,
+    best first, fly the MPC (``mpc_settings``) on the white-box model of the same flight,
+    with each of ``vehicle_drag`` [1/s] added and behind each of ``input_lags`` [s]: hover,
+    a ``step`` m/s step, hold; the first within ``bounds`` (fractions of the step:
+    ``overshoot``, ``final_error``, ``hold_drift``) is taken, else the least violating. The
+    outcome is in ``model.diagnostics['control_check']``. ``settings`` override the
+    search's identification settings."""
+    if result.search is None:
+        raise ConfigError("result: not from a search (no candidates to check)", field="result")
+    s = identify_settings(**{**result.settings, **settings})
+    plant = identify(data, axes=axes, method="whitebox", dt=s["dt"], vehicle_mass=s["vehicle_mass"])
+    selection = {
+        "candidates": candidates,
+        "input_lags": list(input_lags),
+        "vehicle_drag": list(vehicle_drag),
+        "step": step,
+        "bounds": dict(bounds or {}),
+    }
+    x, u, states, inputs = _prepare(data, axes, s)
+    model, _passed = _core.select_for_control(
+        x, u, states, inputs, s, result.search, plant, mpc_settings, selection
     )
-    picked.search_table = result.table
-    return SearchResult(model=picked, table=result.table)
-
-
-def _with_vehicle_drag(model: LinearModel, k: float) -> str:
-    """The model JSON with a linear vehicle drag of ``k`` [1/s] added to each velocity's own
-    coefficient (``v+ -= k·dt·v``): the white-box model has none, the vehicle has about
-    0.25 m/s² at 2 m/s."""
-    d = json.loads(model.to_json())
-    a = np.asarray(d["A"], dtype=float)
-    for i, name in enumerate(d["states"]):
-        if name in ("vn", "ve"):
-            a[i, i] -= k * model.dt
-    d["A"] = a.tolist()
-    d.pop("fingerprint", None)
-    return json.dumps(d)
-
-
-def _with_diagnostics(model: LinearModel, **items: Any) -> LinearModel:
-    d = json.loads(model.to_json())
-    d["diagnostics"].update(items)
-    table = model.search_table
-    out = LinearModel(json.dumps(d))
-    out.search_table = table
-    return out
-
-
-def _whitebox(
-    data,
-    xtr,
-    utr,
-    states,
-    inputs,
-    dt,
-    offset,
-    payload_mass,
-    cable_length,
-    vehicle_mass,
-    friction,
-    swing_band,
-    test_span,
-) -> str:
-    axes = len(inputs)
-    if payload_mass is None:
-        payload_mass = estimate_payload_mass(data, vehicle_mass=vehicle_mass, skip=test_span)
-    freq = None
-    if cable_length is None:
-        swing_cols = range(axes, 2 * axes)
-        # Use the axis that swings most; its FFT peak is the pendulum frequency.
-        j = max(swing_cols, key=lambda i: float(np.std(xtr[:, i])))
-        freq = _core.sysid_fft_peak(np.ascontiguousarray(xtr[:, j]), dt, *swing_band)
-        cable_length = _core.sysid_cable_length(freq, vehicle_mass, payload_mass, GRAVITY)
-    return _core.sysid_whitebox(
-        states,
-        inputs,
-        payload_mass=payload_mass,
-        length=cable_length,
-        vehicle_mass=vehicle_mass,
-        friction=friction,
-        dt=dt,
-        frequency_hz=freq,
-        x=np.ascontiguousarray(xtr),
-        u=np.ascontiguousarray(utr),
-        offset=offset,
-    )
+    return SearchResult(model=model, table=result.table, search=result.search, settings=s)
 
 
 def estimate_payload_mass(
-    data: Any, *, vehicle_mass: float = VEHICLE_MASS, skip: float = 0.0, forgetting: float = 1.0
+    data: Any, *, vehicle_mass: float | None = None, skip: float = 0.0, forgetting: float = 1.0
 ) -> float:
     """Payload mass [kg] by RLS on hover thrust (section 4.3.2): total rotor thrust
     (``thrust``, projected on the vertical with ``roll``/``pitch`` when present) against
     g - a_down, with a_down the derivative of ``vd``; minus the known vehicle mass."""
     cols = _columns(data)
     if "thrust" not in cols:
-        raise DataError("white-box needs a 'thrust' column for the mass estimate, or payload_mass")
+        raise DataError(
+            "the white-box needs a 'thrust' column for the payload-mass estimate, or payload_mass"
+        )
+    if vehicle_mass is None:
+        vehicle_mass = identify_settings()["vehicle_mass"]
     names = ["thrust", "vd"] + [k for k in ("roll", "pitch") if k in cols]
-    r = resample(cols, 0.01, names=names)
+    dt = 0.01
+    r = resample(cols, dt, names=names)
     t = r["t"]
-    keep = t >= t[0] + skip
-    thrust = r["thrust"] * np.cos(r.get("roll", 0.0)) * np.cos(r.get("pitch", 0.0))
-    acc = np.gradient(r["vd"], t)
-    est = _core.sysid_rls_mass(
-        np.ascontiguousarray(thrust[keep]),
-        np.ascontiguousarray(acc[keep]),
-        gravity=GRAVITY,
+    return _core.whitebox_payload_mass(
+        r["thrust"],
+        r["vd"],
+        r.get("roll"),
+        r.get("pitch"),
+        dt=dt,
+        skip=int(np.count_nonzero(t < t[0] + skip)),
+        vehicle_mass=vehicle_mass,
         forgetting=forgetting,
-        initial=vehicle_mass,
     )
-    mass = float(est[-1]) - vehicle_mass
-    if not mass > 0:
-        raise DataError(f"estimated payload mass {mass:.3f} kg is not positive")
-    return mass
+
+
+def to_statespace(model: LinearModel) -> Any:
+    """The model as a discrete python-control ``StateSpace`` (outputs = newest states).
+
+    The input is u - input_mean; the affine term ``model.c`` is not representable in a
+    ``StateSpace``.
+    """
+    import control
+
+    n = len(model.states)
+    C = np.zeros((n, model.order))
+    C[:, :n] = np.eye(n)
+    D = np.zeros((n, len(model.inputs)))
+    return control.ss(
+        model.A, model.B, C, D, model.dt, inputs=list(model.inputs), outputs=list(model.states)
+    )
 
 
 # --------------------------------------------------------------------------- evaluate
-
-
-def _score(model: LinearModel, x, u, horizon: float, starts: int) -> dict[str, Any]:
-    h = _horizon_steps(horizon, model.dt)
-    per, mean = _core.sysid_evaluate(
-        model.to_json(),
-        np.ascontiguousarray(x),
-        np.ascontiguousarray(u),
-        horizon=h,
-        starts=starts,
-    )
-    return {"nmae": mean, "per_state": {s: per[i] for i, s in enumerate(model.states)}}
 
 
 def evaluate(
@@ -669,20 +306,29 @@ def evaluate(
     data: Any,
     *,
     test_span: float | None = None,
-    horizon: float = 20.0,
+    rollout: float = 20.0,
     starts: int = 10,
 ) -> dict[str, Any]:
     """k-step rollout NMAE (section 4.6.2) of ``model`` on ``data`` resampled to the
-    model's dt: ``starts`` evenly spaced start points, ``horizon`` seconds, true inputs only.
+    model's dt: ``starts`` evenly spaced start points, ``rollout`` seconds, true inputs only.
     ``test_span`` limits scoring to the first seconds of the data (default: all of it).
     Returns ``{"nmae": mean, "per_state": {name: nmae}}``."""
+    if not (math.isfinite(rollout) and rollout > 0):
+        raise ConfigError(f"rollout: must be a positive number of seconds, not {rollout}")
     cols = resample(_columns(data), model.dt, names=[*model.states, *model.inputs])
     x = np.column_stack([cols[s] for s in model.states])
     u = np.column_stack([cols[s] for s in model.inputs])
     if test_span is not None:
         k = int(round(test_span / model.dt))
         x, u = x[:k], u[:k]
-    return _score(model, x, u, horizon, starts)
+    per, mean = _core.evaluate(
+        model,
+        np.ascontiguousarray(x),
+        np.ascontiguousarray(u),
+        rollout=max(1, int(round(rollout / model.dt))),
+        starts=starts,
+    )
+    return {"nmae": mean, "per_state": {s: per[i] for i, s in enumerate(model.states)}}
 
 
 # --------------------------------------------------------------------------- sweeps
@@ -692,37 +338,24 @@ def sweep_training_length(
     data: Any,
     lengths: Sequence[float],
     *,
-    method: str = "dmdc",
     axes: str = "n",
-    offset: str = "affine",
-    dt: float = 0.03,
     test_span: float = 40.0,
     delays: Sequence[int] | None = None,
     fine: tuple[int, int] | None = None,
-    smooth: bool = False,
+    **settings: Any,
 ) -> list[dict[str, Any]]:
     """Error vs training length (section 4.6.8): for each length [s] the training data
     (after the test span) are cut to that length and a search picks (q, p). Rows:
     ``train_length, delays, rank, nmae``."""
     cols = dict(_columns(data))
     t = np.asarray(cols["t"], dtype=float)
-    rows = []
+    rows: list[dict[str, Any]] = []
     for length in lengths:
         end = t[0] + test_span + float(length)
         keep = t <= end + 1e-9
         sub = {k: np.asarray(v)[keep] for k, v in cols.items() if np.shape(v) == t.shape}
         try:
-            res = search(
-                sub,
-                method=method,
-                axes=axes,
-                offset=offset,
-                dt=dt,
-                test_span=test_span,
-                delays=delays,
-                fine=fine,
-                smooth=smooth,
-            )
+            res = search(sub, axes=axes, test_span=test_span, delays=delays, fine=fine, **settings)
             sel = res.model.diagnostics["selected"]
             rows.append(
                 {
@@ -749,26 +382,15 @@ def sweep_sample_time(
     data: Any,
     dts: Sequence[float],
     *,
-    method: str = "dmdc",
     axes: str = "n",
-    offset: str = "affine",
-    test_span: float = 40.0,
     delays: Sequence[int] | None = None,
+    **settings: Any,
 ) -> list[dict[str, Any]]:
     """Error vs sample time (section 4.6.4): resample at each Ts and search. Rows:
     ``dt, delays, rank, nmae``."""
     rows = []
     for dt in dts:
-        res = search(
-            data,
-            method=method,
-            axes=axes,
-            offset=offset,
-            dt=float(dt),
-            test_span=test_span,
-            delays=delays,
-            fine=None,
-        )
+        res = search(data, axes=axes, dt=float(dt), delays=delays, fine=None, **settings)
         sel = res.model.diagnostics["selected"]
         rows.append(
             {"dt": float(dt), "delays": sel["delays"], "rank": sel["rank"], "nmae": sel["nmae"]}

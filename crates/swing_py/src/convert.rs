@@ -96,3 +96,79 @@ pub fn write_atomic(path: &std::path::Path, text: &str) -> std::io::Result<()> {
     }
     result
 }
+
+/// A Python dict of overrides → a TOML table: `None` values are left out (absent = the
+/// base's value), floats keep NaN/∞ so the core's checks name them.
+pub fn toml_table(obj: &Bound<'_, PyAny>, section: &str) -> PyResult<toml::Table> {
+    match toml_value(obj, section)? {
+        Some(toml::Value::Table(t)) => Ok(t),
+        _ => Err(to_py(ConfigError::new(
+            if section.is_empty() {
+                "scenario"
+            } else {
+                section
+            },
+            "must be a table (dict) of settings",
+        ))),
+    }
+}
+
+fn toml_value(obj: &Bound<'_, PyAny>, path: &str) -> PyResult<Option<toml::Value>> {
+    use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
+    let bad = |what: &str| {
+        to_py(ConfigError::new(
+            if path.is_empty() { "scenario" } else { path },
+            format!("unsupported value {what}"),
+        ))
+    };
+    if obj.is_none() {
+        return Ok(None);
+    }
+    let value = if let Ok(d) = obj.cast::<PyDict>() {
+        let mut t = toml::Table::new();
+        for (k, v) in d.iter() {
+            let key: String = k.extract().map_err(|_| bad("(a non-string key)"))?;
+            let sub = if path.is_empty() {
+                key.clone()
+            } else {
+                format!("{path}.{key}")
+            };
+            if let Some(v) = toml_value(&v, &sub)? {
+                t.insert(key, v);
+            }
+        }
+        toml::Value::Table(t)
+    } else if obj.is_instance_of::<PyBool>() {
+        toml::Value::Boolean(obj.extract()?)
+    } else if obj.is_instance_of::<PyInt>() {
+        toml::Value::Integer(
+            obj.extract()
+                .map_err(|_| bad("(an integer out of range)"))?,
+        )
+    } else if obj.is_instance_of::<PyFloat>() {
+        toml::Value::Float(obj.extract()?)
+    } else if obj.is_instance_of::<PyString>() {
+        toml::Value::String(obj.extract()?)
+    } else if obj.is_instance_of::<PyList>() || obj.is_instance_of::<PyTuple>() {
+        let mut items = Vec::new();
+        for (i, v) in obj.try_iter()?.enumerate() {
+            let sub = format!("{path}[{i}]");
+            match toml_value(&v?, &sub)? {
+                Some(v) => items.push(v),
+                None => return Err(bad("None in a list")),
+            }
+        }
+        toml::Value::Array(items)
+    } else if let Ok(x) = obj.extract::<f64>() {
+        // numpy scalars and other numbers.
+        toml::Value::Float(x)
+    } else {
+        let name = obj
+            .get_type()
+            .name()
+            .map(|n| n.to_string())
+            .unwrap_or_default();
+        return Err(bad(&format!("of type {name}")));
+    };
+    Ok(Some(value))
+}

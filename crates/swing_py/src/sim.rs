@@ -30,7 +30,7 @@ pub struct PyScenario {
 }
 
 fn overrides(obj: &Bound<'_, PyAny>) -> PyResult<toml::Table> {
-    crate::convert::from_py(obj, "")
+    crate::convert::toml_table(obj, "")
 }
 
 #[pymethods]

@@ -343,17 +343,44 @@ impl<'py> Columns<'py> {
     }
 }
 
-/// The identification settings with every default filled in, validated (`ConfigError`
-/// naming the field).
+/// Check a settings section against its core struct and return it with every default
+/// filled in: `identify`, `mpc`, `lqr` or `selection` (`ConfigError` naming
+/// `section.field`).
 #[pyfunction]
-#[pyo3(signature = (settings=None))]
-fn identify_settings<'py>(
+#[pyo3(signature = (section, settings=None))]
+fn check_settings<'py>(
     py: Python<'py>,
+    section: &str,
     settings: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let s: IdentifySettings = crate::convert::settings(settings, "")?;
-    s.validate().map_err(to_py)?;
-    to_py_object(py, &s)
+    use swing_core::control::{LqrSettings, MpcSettings};
+    let within = |e: swing_core::ConfigError| to_py(crate::convert::within(e, section));
+    match section {
+        "identify" => {
+            let s: IdentifySettings = crate::convert::settings(settings, section)?;
+            s.validate().map_err(within)?;
+            to_py_object(py, &s)
+        }
+        "mpc" => {
+            let s: MpcSettings = crate::convert::settings(settings, section)?;
+            s.validate().map_err(within)?;
+            to_py_object(py, &s)
+        }
+        "lqr" => {
+            let s: LqrSettings = crate::convert::settings(settings, section)?;
+            s.validate().map_err(within)?;
+            to_py_object(py, &s)
+        }
+        "selection" => {
+            let s: SelectionSettings = crate::convert::settings(settings, section)?;
+            s.validate().map_err(within)?;
+            to_py_object(py, &s)
+        }
+        other => Err(raise(
+            Category::Config,
+            format!("unknown settings section {other:?} (identify, mpc, lqr, selection)"),
+        )),
+    }
 }
 
 /// Identify a model from resampled columns `x` (N, n) named `states` and `u` (N, m) named
@@ -529,7 +556,7 @@ fn sysid_smooth_gaussian<'py>(
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyLinearModel>()?;
     m.add_class::<PySearch>()?;
-    m.add_function(wrap_pyfunction!(identify_settings, m)?)?;
+    m.add_function(wrap_pyfunction!(check_settings, m)?)?;
     m.add_function(wrap_pyfunction!(identify, m)?)?;
     m.add_function(wrap_pyfunction!(select_for_control, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;

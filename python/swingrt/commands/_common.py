@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
+from collections.abc import Iterator
 
 from swingrt.errors import ConfigError
 
@@ -25,3 +27,17 @@ def check_output(path: str) -> None:
     """Only .parquet and .csv outputs are supported."""
     if not (path.endswith(".parquet") or path.endswith(".csv")):
         raise ConfigError(f"-o {path}: output must end in .parquet or .csv")
+
+
+@contextlib.contextmanager
+def options_named() -> Iterator[None]:
+    """Re-raise a settings ``ConfigError`` naming the command-line option, not the field
+    (``identify.delays: ...`` → ``--delays: ...``)."""
+    try:
+        yield
+    except ConfigError as exc:
+        if not exc.field:
+            raise
+        flag = "--" + exc.field.split(".")[-1].replace("_", "-")
+        problem = str(exc).split(": ", 1)[-1]
+        raise ConfigError(f"{flag}: {problem}", field=exc.field) from None

@@ -21,7 +21,7 @@ def sim_rtf(quick: bool) -> dict:
     from swingrt import _core
     from swingrt.scenario import resolve
 
-    sc = json.dumps(resolve(None, default="step"))
+    sc = resolve(None, default="step")
     seconds = 20.0 if quick else 60.0
     runs = [_core.sim_real_time_factor(sc, seconds) for _ in range(3 if quick else 5)]
     return {"median": statistics.median(runs), "runs": runs, "sim_seconds": seconds}
@@ -39,9 +39,9 @@ def _timeit(fn, repeat: int) -> list[float]:
 
 
 def sysid(quick: bool) -> dict:
-    """One DMDc fit (q = 50, 120 s at 0.03 s, one axis) and the 366-candidate reference grid
-    (q = 2…60 step 2 × p = 5…2q+1 step 5, 10 rollouts of 20 s), on a simulated flight, plus
-    the default coarse→fine search of ``identify --search``."""
+    """One DMDc fit (q = 50, 120 s at 0.03 s, one axis) and the reference grid (q = 2…60
+    step 2 × p = 5…full rank step 5 with the affine column, 10 rollouts of 20 s), on a
+    simulated flight, plus the default coarse→fine search of ``identify --search``."""
     import numpy as np
 
     from swingrt import _core
@@ -56,35 +56,29 @@ def sysid(quick: bool) -> dict:
     k = int(round(40.0 / dt))
     names = (["vn", "swing_n"], ["acc_sp_n"])
     xtr, utr = np.ascontiguousarray(x[k:]), np.ascontiguousarray(u[k:])
-    xte, ute = np.ascontiguousarray(x[:k]), np.ascontiguousarray(u[:k])
-    fit = _timeit(
-        lambda: _core.sysid_fit(xtr, utr, *names, delays=50, rank=40, offset="affine", dt=dt),
-        10 if quick else 30,
-    )
-    grid = _timeit(
-        lambda: _core.sysid_search(
-            xtr,
-            utr,
-            xte,
-            ute,
-            *names,
-            offset="affine",
-            dt=dt,
-            horizon=int(round(20.0 / dt)),
-            starts=10,
-            delays=list(range(2, 61, 2)),
-            rank_start=5,
-            rank_step=5,
-            rank_extra=0,
-            fine=None,
-        ),  # fmt: skip
-        2 if quick else 5,
-    )
+    one_fit = {"delays": 50, "rank": 40, "offset": "affine", "dt": dt, "test_span": 0.0}
+    fit = _timeit(lambda: _core.identify(xtr, utr, *names, one_fit), 10 if quick else 30)
+    reference = {
+        "search": True,
+        "offset": "affine",
+        "dt": dt,
+        "test_span": 40.0,
+        "rollout": 20.0,
+        "starts": 10,
+        "search_delays": list(range(2, 61, 2)),
+        "rank_start": 5,
+        "rank_step": 5,
+        "fine": None,
+    }
+    grid = _timeit(lambda: _core.identify(x, u, *names, reference), 2 if quick else 5)
+    _, found = _core.identify(x, u, *names, reference)
+    candidates = len(found.table()) if found is not None else 0
     default = _timeit(lambda: search(trace, dt=dt), 1 if quick else 3)
     return {
         "dmdc_fit_ms": statistics.median(fit) * 1e3,
         "dmdc_search_s": statistics.median(grid),
         "dmdc_search_default_s": statistics.median(default),
+        "dmdc_search_candidates": candidates,
         "training_samples": int(len(xtr)),
     }
 
@@ -97,7 +91,7 @@ def mpc(quick: bool) -> dict:
     n = 500 if quick else 3000
     out: dict = {}
     for axes, key in ((1, "mpc_step_us"), (2, "mpc_step_us_two_axes")):
-        model = _core.pendulum_model_json(delays=50, axes=axes)
+        model = _core.pendulum_model(delays=50, axes=axes)
         res: dict = {}
         for label, constrained, solver in (
             ("unconstrained", False, "active_set"),

@@ -44,18 +44,16 @@ def run(args) -> int:
             axes=args.axes or "n",
         )
         return 0
-    from swingrt.scenario import _merge, read_toml
+    from swingrt.scenario import resolve
     from swingrt.sim import collect
 
-    config = args.scenario
+    config = resolve(args.scenario, default="training")
     if args.axes == "ne":
-        base = read_toml(config) if config else {}
-        config = _merge(
-            base,
+        config = config.with_overrides(
             {
                 "random_steps": {"axes": "ne"},
                 "setpoints": [{"t": 0.0, "vn": 0.0, "ve": 0.0}],
-            },
+            }
         )
     trace = collect(config, duration=args.duration, seed=args.seed, progress=None)
     trace.save(args.output)

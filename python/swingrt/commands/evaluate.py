@@ -16,7 +16,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
     )
     p.add_argument("model", metavar="MODEL", help="model file (.json)")
     p.add_argument("data", metavar="DATA", help="flight log (.parquet, .csv, .ulg)")
-    p.add_argument("--horizon", type=float, default=20.0, help="rollout horizon [s]")
+    p.add_argument("--rollout", "--horizon", type=float, default=20.0, help="rollout length [s]")
     p.add_argument("--starts", type=int, default=10, help="number of start points")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     return p
@@ -32,7 +32,7 @@ def run(args) -> int:
         raise ConfigError(f"--starts: must be at least 1 (got {args.starts})")
     model = sysid.LinearModel.load(args.model)
     data = load_flight(args.data)
-    res = sysid.evaluate(model, data, horizon=args.horizon, starts=args.starts)
+    res = sysid.evaluate(model, data, rollout=args.rollout, starts=args.starts)
     if args.json:
         print(json.dumps(res))
     else:

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 
+from swingrt.commands._common import options_named
 from swingrt.errors import ConfigError
 
 
@@ -36,6 +36,21 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--dt", type=float, default=0.03, help="model sample time [s]")
     p.add_argument("--test-span", type=float, default=40.0, help="held-out span [s]")
     p.add_argument("--smooth", action="store_true", help="smooth states and inputs (4.6.6)")
+    p.add_argument(
+        "--payload-mass",
+        type=float,
+        metavar="KG",
+        help="white-box payload mass (default: RLS on the log's thrust column)",
+    )
+    p.add_argument(
+        "--vehicle-mass", type=float, metavar="KG", help="white-box vehicle mass (default 0.952)"
+    )
+    p.add_argument(
+        "--cable-length",
+        type=float,
+        metavar="M",
+        help="white-box cable length (default: from the swing's FFT peak)",
+    )
     p.add_argument("--plots", metavar="DIR", help="write diagnostic plots into DIR")
     p.add_argument(
         "--sweep",
@@ -53,39 +68,35 @@ def run(args) -> int:
     from swingrt.io import load_flight
     from swingrt.reports import plot_pareto
 
-    if not (math.isfinite(args.dt) and args.dt > 0):
-        raise ConfigError(f"--dt: must be a positive number of seconds (got {args.dt})")
-    if args.delays is not None and args.delays < 1:
-        raise ConfigError(f"--delays: must be at least 1 (got {args.delays})")
-    if args.rank is not None and args.rank < 1:
-        raise ConfigError(f"--rank: must be at least 1 (got {args.rank})")
-    if args.search and (args.delays is not None or args.rank is not None):
-        raise ConfigError("--search chooses q and p itself: drop --delays/--rank")
-    if args.search and args.method == "whitebox":
-        raise ConfigError("--search applies to dmdc and havokc, not whitebox")
-    data = load_flight(args.data)
-    common = dict(
+    settings = dict(
         method=args.method,
-        axes=args.axes,
         offset=args.offset,
         dt=args.dt,
         test_span=args.test_span,
         smooth=args.smooth,
+        search=args.search,
+        select=args.select,
+        delays=args.delays,
+        rank=args.rank,
+        payload_mass=args.payload_mass,
+        vehicle_mass=args.vehicle_mass,
+        cable_length=args.cable_length,
     )
+    with options_named():
+        checked = sysid.identify_settings(**settings)
+    data = load_flight(args.data)
     result = None
     if args.search:
-        result = sysid.search(data, **common)
+        search_opts = {k: v for k, v in checked.items() if k not in ("delays", "rank")}
+        result = sysid.search(data, axes=args.axes, **search_opts)
         if args.select == "control":
-            fit = {k: v for k, v in common.items() if k not in ("method", "axes")}
-            result = sysid.select_for_control(
-                data, result, method=args.method, axes=args.axes, **fit
-            )
+            result = sysid.select_for_control(data, result, axes=args.axes)
             cc = result.model.diagnostics["control_check"]
             verdict = "passed" if cc["passed"] else "no candidate passed; least violating kept"
             print(f"closed-loop check: {verdict} ({len(cc['checked'])} candidate(s) flown)")
         model = result.model
     else:
-        model = sysid.identify(data, delays=args.delays, rank=args.rank, **common)
+        model = sysid.identify(data, axes=args.axes, **checked)
     model.save(args.output)
     nm = model.diagnostics.get("test_nmae")
     score = f"{nm:.4f}" if isinstance(nm, (int, float)) else "n/a"
@@ -100,7 +111,7 @@ def run(args) -> int:
             plot_pareto(result, out / "error_vs_delays.png")
             print(f"wrote {out / 'error_vs_delays.png'}")
     if args.sweep:
-        _sweep(args, data, common)
+        _sweep(args, data, checked)
     print(f"wrote {args.output}")
     return 0
 
@@ -119,7 +130,8 @@ def _sweep(args, data, common) -> None:
     lengths = [float(x) for x in np.arange(20.0, avail + 1e-9, 20.0)]
     if not lengths:
         raise ConfigError(f"--sweep: the flight leaves only {avail:.0f} s after the test span")
-    kw = {k: v for k, v in common.items() if k in ("method", "axes", "offset", "test_span")}
+    kw = {k: v for k, v in common.items() if k in ("method", "offset", "test_span")}
+    kw["axes"] = args.axes
     if args.sweep == "length":
         rows = sysid.sweep_training_length(data, lengths, dt=args.dt, **kw)
         plot_training_length(rows, out / "error_vs_training_length.png")

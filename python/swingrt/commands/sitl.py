@@ -60,8 +60,9 @@ def run(args) -> int:
     # The vehicle is commanded over MAVLink only: a setpoint schedule in the scenario would
     # fight the offboard node, so it is dropped (the vehicle starts holding its start point).
     duration = float(args.duration) if args.duration is not None else 3600.0
-    scenario = resolve(args.scenario, default="hover", duration=duration)
-    scenario["setpoints"] = []
+    scenario = resolve(args.scenario, default="hover", duration=duration).with_overrides(
+        {"setpoints": []}
+    )
     sim = Simulator(scenario)
     run_vehicle(
         sim,

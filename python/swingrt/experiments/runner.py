@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import copy
 import itertools
-import json
 import os
 import sys
 import time
@@ -29,7 +28,8 @@ from swingrt.errors import ConfigError
 from swingrt.io.flight import Trace
 from swingrt.metrics import step_metrics, swing_iae_floor
 from swingrt.reports import plot_case, plot_prediction, write_metrics
-from swingrt.scenario import _merge, builtin, read_toml, resolve
+from swingrt.scenario import Scenario, read_toml
+from swingrt.sysid import LinearModel
 
 
 def _defs() -> Traversable:
@@ -95,7 +95,29 @@ class Experiment:
         for k, v in exp.grid.items():
             if not isinstance(v, list) or not v:
                 raise ConfigError(f"{source}: grid.{k}: must be a non-empty list")
+        exp.check(source)
         return exp
+
+    def check(self, source: str) -> None:
+        """Validate every settings section and every case's scenarios in the core, so a typo
+        fails before anything flies; errors name the file and the dotted field."""
+        from swingrt import _core
+
+        try:
+            ident = {k: v for k, v in self.identify.items() if k != "search"}
+            if not isinstance(self.identify.get("search", True), bool):
+                raise ConfigError("identify.search: must be true or false", field="identify.search")
+            _core.check_settings("identify", ident)
+            _core.check_settings("mpc", self.mpc)
+            _core.check_settings("lqr", self.lqr)
+            for case, over in cases(self):
+                try:
+                    train = training_scenario(self, over, 0)
+                    evaluation_scenario(self, over, 0, train)
+                except ConfigError as exc:
+                    raise ConfigError(f"case {case}: {exc}", field=exc.field) from None
+        except ConfigError as exc:
+            raise ConfigError(f"{source}: {exc}", field=exc.field) from None
 
 
 def list_experiments() -> dict[str, str]:
@@ -150,52 +172,31 @@ def _step_setpoints(step: dict[str, float]) -> list[dict[str, float]]:
     return [start, dict(step)]
 
 
-def _hover_thrust(sc: dict[str, Any]) -> float:
-    """Normalised hover thrust PX4's estimator would settle on for this scenario."""
-    v = sc["vehicle"]
-    p = sc["payload"]
-    payload = {"none": 0.0, "single": p["mass"], "double": p["mass"] + p["mass2"]}[p["kind"]]
-    per_motor = (v["mass"] + payload) * 9.80665 / 4.0
-    a3, a2, a1, a0 = v["thrust_poly"]
-    lo, hi = 0.0, 1.0
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        x = v["pwm_min"] + (v["pwm_max"] - v["pwm_min"]) * mid
-        if ((a3 * x + a2) * x + a1) * x + a0 < per_motor:
-            lo = mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
-
-
-def training_scenario(exp: Experiment, over: dict[str, Any], seed: int) -> dict[str, Any]:
+def training_scenario(exp: Experiment, over: dict[str, Any], seed: int) -> Scenario:
     """The random-step training flight of a case."""
-    sc = _merge(builtin("training"), copy.deepcopy(exp.common))
-    sc = _merge(sc, copy.deepcopy(over))
+    sc = Scenario.builtin("training").with_overrides(exp.common).with_overrides(over)
     if exp.axes == "ne":
-        sc = _merge(
-            sc, {"random_steps": {"axes": "ne"}, "setpoints": [{"t": 0.0, "vn": 0.0, "ve": 0.0}]}
+        sc = sc.with_overrides(
+            {"random_steps": {"axes": "ne"}, "setpoints": [{"t": 0.0, "vn": 0.0, "ve": 0.0}]}
         )
-    sc = _merge(sc, copy.deepcopy(exp.training))
-    sc["duration"] = float(exp.training_duration)
-    sc["name"] = "training"
-    return resolve(sc, default="training", seed=seed)
+    return sc.with_overrides(exp.training).with_overrides(
+        {"duration": float(exp.training_duration), "name": "training", "seed": seed}
+    )
 
 
 def evaluation_scenario(
-    exp: Experiment, over: dict[str, Any], seed: int, training: dict[str, Any]
-) -> dict[str, Any]:
+    exp: Experiment, over: dict[str, Any], seed: int, training: Scenario
+) -> Scenario:
     """The step flight of a case; PX4 keeps the training flight's hover thrust if the
     evaluation changes the vehicle (nobody is told)."""
-    sc = _merge(builtin("step"), copy.deepcopy(exp.common))
-    sc = _merge(sc, copy.deepcopy(over))
-    sc["setpoints"] = _step_setpoints(exp.step)
-    sc["duration"] = float(exp.duration)
+    sc = Scenario.builtin("step").with_overrides(exp.common).with_overrides(over)
+    sc = sc.with_overrides(
+        {"setpoints": _step_setpoints(exp.step), "duration": float(exp.duration)}
+    )
     ev = copy.deepcopy(exp.evaluation)
     if "vehicle" in ev and "hover_thrust" not in ev.get("controller", {}):
-        ev.setdefault("controller", {})["hover_thrust"] = _hover_thrust(training)
-    sc = _merge(sc, ev)
-    return resolve(sc, default="step", seed=seed)
+        ev.setdefault("controller", {})["hover_thrust"] = training.hover_thrust()
+    return sc.with_overrides(ev).with_overrides({"seed": seed})
 
 
 class _Log:
@@ -209,11 +210,11 @@ class _Log:
 
 
 def simulate_controller(
-    scenario: dict[str, Any],
+    scenario: Scenario,
     controller: str,
     *,
     axes: str = "n",
-    model_json: str | None = None,
+    model: LinearModel | None = None,
     lqr_params: dict[str, float] | None = None,
     mpc_settings: dict[str, Any] | None = None,
     lqr_settings: dict[str, Any] | None = None,
@@ -227,30 +228,30 @@ def simulate_controller(
     """
     from swingrt import _core
 
-    sim = _core.Simulator(json.dumps(scenario))
+    sim = _core.Simulator(scenario)
     n_axes = len(axes)
     extras: dict[str, Any] = {}
     if controller == "mpc":
-        if model_json is None:
-            raise ConfigError("mpc needs an identified model")
-        settings = json.dumps(mpc_settings) if mpc_settings else None
-        sim.attach_mpc(model_json, settings, engage_at, 0.03)
+        if model is None:
+            raise ConfigError("mpc needs an identified model", field="model")
+        # The budget of one tick is its period.
+        sim.attach_mpc(model, mpc_settings or None, engage_at, model.dt)
     elif controller == "lqr":
         if lqr_params is None:
-            raise ConfigError("lqr needs the white-box parameters")
-        settings = json.dumps(lqr_settings) if lqr_settings else None
-        p = lqr_params
-        sim.attach_lqr(p["m_q"], p["m_p"], p["l"], p["c"], n_axes, settings, engage_at, 0.02)
+            raise ConfigError("lqr needs the white-box parameters", field="lqr_params")
+        lqr = _core.check_settings("lqr", lqr_settings or None)
+        # The budget of one tick is its period.
+        sim.attach_lqr(lqr_params, n_axes, lqr, engage_at, lqr["period"])
     elif controller != "pid":
-        raise ConfigError(f"unknown controller {controller!r}")
-    if prediction_at is not None and controller == "mpc":
+        raise ConfigError(f"unknown controller {controller!r}", field="controller")
+    if prediction_at is not None and model is not None and controller == "mpc":
         sim.advance(prediction_at)
-        sim.advance(0.03)
+        sim.advance(model.dt)
         pred = sim.controller_prediction()
         if pred is not None:
             extras["prediction"] = {"t0": sim.t, "outputs": np.asarray(pred)}
     sim.run_to_end()
-    trace = Trace(sim.take_trace(), {"scenario": scenario, "controller": controller})
+    trace = Trace(sim.take_trace(), {"scenario": scenario.to_dict(), "controller": controller})
     extras["fallback"] = sim.fallback_reason
     ticks = np.asarray(sim.tick_times())
     if len(ticks):
@@ -258,10 +259,6 @@ def simulate_controller(
         extras["tick_us_p99"] = float(np.percentile(ticks, 99))
         extras["constrained_ticks"] = int(sim.constrained_ticks)
     return trace, extras
-
-
-#: Identification options a refit needs to reproduce a search's candidate.
-_FIT_OPTIONS = ("offset", "dt", "test_span", "horizon", "starts", "smooth", "smooth_window")
 
 
 def identify_case(
@@ -272,19 +269,16 @@ def identify_case(
     from swingrt.reports import plot_pareto
     from swingrt.sysid import identify, search, select_for_control
 
-    opts = dict(exp.identify)
+    opts = {"method": "dmdc", **exp.identify}
     if opts.pop("search", True) and "delays" not in opts:
-        result = search(train, method="dmdc", axes=exp.axes, **opts)
-        if "mpc" in exp.controllers:
-            fit = {k: v for k, v in opts.items() if k in _FIT_OPTIONS}
-            result = select_for_control(
-                train, result, axes=exp.axes, mpc_settings=exp.mpc or None, **fit
-            )
+        result = search(train, axes=exp.axes, **opts)
+        if "mpc" in exp.controllers and result.settings["select"] == "control":
+            result = select_for_control(train, result, axes=exp.axes, mpc_settings=exp.mpc or None)
         model = result.model
         if plots is not None:
             plot_pareto(result, plots)
     else:
-        model = identify(train, method="dmdc", axes=exp.axes, **opts)
+        model = identify(train, axes=exp.axes, **opts)
     wb = identify(train, method="whitebox", axes=exp.axes)
     est = wb.diagnostics["whitebox"]
     lqr = {
@@ -326,7 +320,7 @@ def run_experiment(
                 ev_sc,
                 ctrl,
                 axes=exp.axes,
-                model_json=model.to_json(),
+                model=model,
                 lqr_params=lqr,
                 mpc_settings=exp.mpc or None,
                 lqr_settings=exp.lqr or None,

@@ -31,7 +31,6 @@ Loop timing is recorded per tick: period jitter (start minus deadline) and compu
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import time
@@ -42,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from swingrt._core import Mpc
-from swingrt.errors import ConfigError, ControlError, FlightAbort, LinkError
+from swingrt.errors import ConfigError, ControlError, FlightAbort, LinkError, ModelError
 from swingrt.io.flight import write_columns
 from swingrt.mavlink.link import (
     PX4_MAIN_MODE,
@@ -560,26 +559,15 @@ class OffboardSession:
 
 
 def load_controller(model_path, settings=None):
-    """Build the MPC (``swingrt._core.Mpc``) from a model JSON file; returns (ctrl, ts, axes)."""
+    """Build the MPC (``swingrt._core.Mpc``) from a model file; returns (ctrl, ts, axes)."""
+    from swingrt.sysid import LinearModel
+
     p = Path(model_path)
-    try:
-        text = p.read_text(encoding="utf-8")
-        model = json.loads(text)
-    except FileNotFoundError:
-        raise ConfigError(f"{p}: no such model file") from None
-    except json.JSONDecodeError as exc:
-        raise ConfigError(f"{p}: not a JSON model ({exc.msg} at line {exc.lineno})") from None
-    if not isinstance(model, dict) or model.get("format") != "swingrt-model/1":
-        raise ConfigError(f"{p}: not a swingrt-model/1 file")
-    try:
-        ts = float(model["dt"])
-        inputs = list(model["inputs"])
-    except (KeyError, TypeError, ValueError):
-        raise ConfigError(f"{p}: model lacks dt or inputs") from None
-    axes = len(inputs)
+    model = LinearModel.load(p)
+    axes = len(model.inputs)
     if axes not in (1, 2):
-        raise ConfigError(f"{p}: model has {axes} inputs; fly supports 1 (North) or 2 (N, E)")
-    return Mpc(text, settings), ts, axes
+        raise ModelError(f"{p}: model has {axes} inputs; fly supports 1 (North) or 2 (N, E)")
+    return Mpc(model, settings), model.dt, axes
 
 
 #: P gain [1/s] of the East velocity hold while a one-axis controller flies North.

@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from swingrt.errors import ConfigError
 from swingrt.mavlink.link import connect
 from swingrt.mavlink.offboard import (
@@ -23,6 +21,7 @@ from swingrt.mavlink.offboard import (
     Watchdog,
     _finish,
 )
+from swingrt.scenario import Scenario
 
 __all__ = ["random_step_mission", "collect_over_mavlink"]
 
@@ -36,19 +35,25 @@ def random_step_mission(
     axes: str = "n",
 ) -> Mission:
     """Table 4.1 schedule: each interval U(interval_range) s holds a step U(v_range) m/s
-    (North; with ``axes="ne"`` an independent East step too), from a seeded generator."""
-    if not (duration > 0 and math.isfinite(duration)):
-        raise ConfigError(f"duration must be positive, not {duration}")
-    if axes not in ("n", "ne"):
-        raise ConfigError(f"axes must be 'n' or 'ne', not {axes}")
-    rng = np.random.default_rng(seed)
+    (North; with ``axes="ne"`` an independent East step too), from the seeded generator of
+    the simulator's training flight, so one seed flies one mission in simulation and over
+    MAVLink."""
+    if not (isinstance(duration, (int, float)) and duration > 0 and math.isfinite(duration)):
+        raise ConfigError(f"duration: must be positive, not {duration}", field="duration")
+    steps_cfg = {
+        "axes": axes,
+        "v_min": float(v_range[0]),
+        "v_max": float(v_range[1]),
+        "interval_min": float(interval_range[0]),
+        "interval_max": float(interval_range[1]),
+    }
+    sc = Scenario.builtin("training").with_overrides(
+        {"duration": float(duration), "seed": int(seed), "random_steps": steps_cfg}
+    )
     steps = [(0.0, 0.0, 0.0)]
-    t = 2.0  # hover a moment before the first step
-    while t < duration:
-        vn = float(rng.uniform(*v_range))
-        ve = float(rng.uniform(*v_range)) if axes == "ne" else 0.0
-        steps.append((t, vn, ve))
-        t += float(rng.uniform(*interval_range))
+    for e in sc.schedule():
+        if e["t"] > 0.0:
+            steps.append((float(e["t"]), float(e["vn"] or 0.0), float(e["ve"] or 0.0)))
     return Mission(steps, float(duration))
 
 

@@ -304,10 +304,67 @@ pub fn payload_mass_from_thrust(
         .collect();
     let est = whitebox::rls_mass(&vertical, &acc, GRAVITY, forgetting, vehicle_mass)?;
     let mass = est.last().copied().unwrap_or(f64::NAN) - vehicle_mass;
-    if !(mass > 0.0) {
+    if mass.is_nan() || mass <= 0.0 {
         return Err(SysidError::Identification(format!(
             "estimated payload mass {mass:.3} kg is not positive"
         )));
     }
     Ok(mass)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Hover with a vertical oscillation and a tilt: the thrust that holds a total mass M is
+    /// M (g − a_down) / (cos roll · cos pitch); the estimate must return M − m_Q.
+    #[test]
+    fn payload_mass_inverts_the_vertical_force_balance() {
+        let (dt, n, m_total, m_q) = (0.01, 6000, 1.2, 0.952);
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+        let vd: Vec<f64> = t.iter().map(|t| 0.3 * (1.1 * t).sin()).collect();
+        let roll: Vec<f64> = t.iter().map(|t| 0.1 * (0.7 * t).cos()).collect();
+        let pitch: Vec<f64> = t.iter().map(|t| 0.05 * (0.3 * t).sin()).collect();
+        let thrust: Vec<f64> = (0..n)
+            .map(|k| {
+                // The exact derivative: the estimate's central difference is O(dt²) off.
+                let a_down = 0.33 * (1.1 * t[k]).cos();
+                m_total * (GRAVITY - a_down) / (roll[k].cos() * pitch[k].cos())
+            })
+            .collect();
+        let log = ThrustLog {
+            thrust: &thrust,
+            vd: &vd,
+            roll: Some(&roll),
+            pitch: Some(&pitch),
+            dt,
+        };
+        let m = payload_mass_from_thrust(&log, 100, m_q, 1.0).unwrap();
+        assert!((m - (m_total - m_q)).abs() < 1e-4, "{m}");
+        // A thrust too small for the vehicle alone is refused, not returned negative.
+        let weak: Vec<f64> = thrust.iter().map(|f| 0.5 * f).collect();
+        let log = ThrustLog {
+            thrust: &weak,
+            ..log
+        };
+        assert!(payload_mass_from_thrust(&log, 0, m_q, 1.0).is_err());
+    }
+
+    #[test]
+    fn split_holds_out_the_start_and_refuses_short_data() {
+        let x = vec![0.0; 2 * 100];
+        let u = vec![0.0; 100];
+        let traj = Trajectory::new(&x, 2, &u, 1).unwrap();
+        let s = IdentifySettings {
+            test_span: 0.9,
+            ..IdentifySettings::default()
+        };
+        let (train, test) = split(&traj, &s).unwrap();
+        assert_eq!((train.len, test.len), (70, 30));
+        let s = IdentifySettings {
+            test_span: 3.0,
+            ..IdentifySettings::default()
+        };
+        assert!(matches!(split(&traj, &s), Err(SysidError::Data(_))));
+    }
 }

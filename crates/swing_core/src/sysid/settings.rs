@@ -268,3 +268,44 @@ impl IdentifySettings {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_validate_and_bad_fields_are_named() {
+        IdentifySettings::default().validate().unwrap();
+        let e = IdentifySettings::from_json(r#"{"serch": true}"#).unwrap_err();
+        assert!(e.to_string().contains("serch"), "{e}");
+        let e = IdentifySettings::from_json(r#"{"dt": -0.1}"#).unwrap_err();
+        assert_eq!(e.field, "dt");
+        let e = IdentifySettings::from_json(r#"{"search": true, "delays": 4}"#).unwrap_err();
+        assert_eq!(e.field, "search");
+        let e =
+            IdentifySettings::from_json(r#"{"method": "whitebox", "search": true}"#).unwrap_err();
+        assert_eq!(e.field, "search");
+        let e = IdentifySettings::from_json(r#"{"swing_band": [2.0, 1.0]}"#).unwrap_err();
+        assert_eq!(e.field, "swing_band");
+        // The seconds-named alias of the rollout length is read too.
+        let s = IdentifySettings::from_json(r#"{"horizon": 3.0}"#).unwrap();
+        assert_eq!(s.rollout_samples(), 100);
+    }
+
+    #[test]
+    fn the_coarse_grid_and_scoring_follow_the_settings() {
+        let s = IdentifySettings::default();
+        assert_eq!(
+            s.coarse_grid().delays,
+            (2..=58).step_by(4).collect::<Vec<_>>()
+        );
+        assert_eq!(s.fit_delays(), DEFAULT_DELAYS);
+        let sc = s.search_settings().unwrap();
+        assert_eq!((sc.horizon, sc.starts), (667, 10));
+        let wb = IdentifySettings {
+            method: IdentifyMethod::Whitebox,
+            ..IdentifySettings::default()
+        };
+        assert!(wb.search_settings().is_none());
+    }
+}
