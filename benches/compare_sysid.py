@@ -184,31 +184,33 @@ def main() -> None:
     x, u = np.ascontiguousarray(x), np.ascontiguousarray(u)
     names = (["vn", "swing_n"], ["acc_sp_n"])
 
+    one_fit = {"delays": Q_FIT, "rank": P_FIT, "offset": "mean", "dt": DT, "test_span": 0.0}
+    grid = {
+        "search": True,
+        "offset": "mean",
+        "dt": DT,
+        "test_span": split * DT,
+        "rollout": HORIZON * DT,
+        "starts": STARTS,
+        "search_delays": list(GRID_Q),
+        "rank_start": 5,
+        "rank_step": 5,
+        "fine": None,
+    }
+    x2c, u2c = np.ascontiguousarray(x2), np.ascontiguousarray(u2)
+
     def rust_fit():
-        _core.sysid_fit(x, u, *names, delays=Q_FIT, rank=P_FIT, offset="mean", dt=DT)
+        _core.identify(x, u, *names, one_fit)
 
     def rust_grid():
-        return _core.sysid_search(
-            np.ascontiguousarray(x_tr),
-            np.ascontiguousarray(u_tr),
-            np.ascontiguousarray(x_te),
-            np.ascontiguousarray(u_te),
-            *names,
-            offset="mean",
-            dt=DT,
-            horizon=HORIZON,
-            starts=STARTS,
-            delays=GRID_Q,
-            rank_start=5,
-            rank_step=5,
-            rank_extra=0,
-            fine=None,
-        )
+        _, found = _core.identify(x2c, u2c, *names, grid)
+        table = found.table()
+        return table, found.best
 
     rows = []
     rows.append(("fit", "swingrt", timeit(rust_fit, args.repeat * 4)))
     rows.append(("fit", "numpy", timeit(lambda: numpy_fit(x, u), args.repeat * 4)))
-    _, table, best = rust_grid()
+    table, best = rust_grid()
     rows.append(("grid", "swingrt", timeit(rust_grid, args.repeat)))
     rows.append(("grid", "numpy", timeit(lambda: numpy_grid(x_tr, u_tr, x_te, u_te), 1)))
     try:
@@ -220,8 +222,8 @@ def main() -> None:
         print("PyDMD not installed: skipping its timings (pip install pydmd)")
     np_best = numpy_grid(x_tr, u_tr, x_te, u_te)
     print(
-        f"swingrt grid selected q = {table[best][0]}, p = {table[best][1]}, "
-        f"NMAE {table[best][2]:.4f}; numpy selected {np_best[1]}, NMAE {np_best[0]:.4f}"
+        f"swingrt grid selected q = {table[best]['delays']}, p = {table[best]['rank']}, "
+        f"NMAE {table[best]['nmae']:.4f}; numpy selected {np_best[1]}, NMAE {np_best[0]:.4f}"
     )
     base = {task: t for task, who, t in rows if who == "swingrt"}
     print(f"{'task':<6}{'tool':<10}{'median':>12}{'vs swingrt':>12}")

@@ -58,12 +58,9 @@ def main() -> int:
                 train_sc = training_scenario(exp, over, seed)
                 ev = evaluation_scenario(exp, over, seed + 1, train_sc)
                 train = _run(train_sc, False, "collect")
-                result = search(train, method="dmdc", axes=exp.axes, **opts)
+                result = search(train, axes=exp.axes, **{"method": "dmdc", **opts})
                 if args.select == "control":
-                    fit = {k: v for k, v in opts.items() if k in ("offset", "dt", "test_span")}
-                    result = select_for_control(
-                        train, result, axes=exp.axes, mpc_settings=settings, **fit
-                    )
+                    result = select_for_control(train, result, axes=exp.axes, mpc_settings=settings)
                 model = result.model
                 pid, _ = simulate_controller(ev, "pid", axes=exp.axes)
                 ref = step_metrics(pid, t0=exp.step["t"], axis=axis)["swing_iae_deg_s"]
