@@ -19,12 +19,11 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "JSON file.",
     )
     p.add_argument("data", metavar="DATA", help="flight log (.parquet, .csv, .ulg)")
-    p.add_argument("--method", choices=("dmdc", "havokc", "whitebox"), default="dmdc")
+    p.add_argument("--method", choices=("dmdc", "havokc", "whitebox"), help="method (default dmdc)")
     p.add_argument("--search", action="store_true", help="coarse→fine search over q and p")
     p.add_argument(
         "--select",
         choices=("control", "nmae"),
-        default="control",
         help="with --search: 'control' (default) takes the lowest-NMAE candidate whose MPC "
         "passes a closed-loop step check on the white-box model of the same flight; 'nmae' "
         "the lowest NMAE alone",
@@ -32,9 +31,11 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--axes", choices=("n", "ne"), default="n", help="North, or North + East")
     p.add_argument("--delays", type=int, metavar="Q", help="delay count q (default 20)")
     p.add_argument("--rank", type=int, metavar="P", help="SVD truncation rank p (default full)")
-    p.add_argument("--offset", choices=("none", "mean", "affine"), default="affine")
-    p.add_argument("--dt", type=float, default=0.03, help="model sample time [s]")
-    p.add_argument("--test-span", type=float, default=40.0, help="held-out span [s]")
+    p.add_argument(
+        "--offset", choices=("none", "mean", "affine"), help="input offset (default affine)"
+    )
+    p.add_argument("--dt", type=float, help="model sample time [s] (default 0.03)")
+    p.add_argument("--test-span", type=float, help="held-out span [s] (default 40)")
     p.add_argument("--smooth", action="store_true", help="smooth states and inputs (4.6.6)")
     p.add_argument(
         "--payload-mass",
@@ -89,7 +90,7 @@ def run(args) -> int:
     if args.search:
         search_opts = {k: v for k, v in checked.items() if k not in ("delays", "rank")}
         result = sysid.search(data, axes=args.axes, **search_opts)
-        if args.select == "control":
+        if checked["select"] == "control":
             result = sysid.select_for_control(data, result, axes=args.axes)
             cc = result.model.diagnostics["control_check"]
             verdict = "passed" if cc["passed"] else "no candidate passed; least violating kept"
@@ -126,18 +127,18 @@ def _sweep(args, data, common) -> None:
 
     out = Path(args.plots or ".")
     t = np.asarray(data["t"], dtype=float)
-    avail = float(t[-1] - t[0]) - args.test_span
+    avail = float(t[-1] - t[0]) - common["test_span"]
     lengths = [float(x) for x in np.arange(20.0, avail + 1e-9, 20.0)]
     if not lengths:
         raise ConfigError(f"--sweep: the flight leaves only {avail:.0f} s after the test span")
     kw = {k: v for k, v in common.items() if k in ("method", "offset", "test_span")}
     kw["axes"] = args.axes
     if args.sweep == "length":
-        rows = sysid.sweep_training_length(data, lengths, dt=args.dt, **kw)
+        rows = sysid.sweep_training_length(data, lengths, dt=common["dt"], **kw)
         plot_training_length(rows, out / "error_vs_training_length.png")
     elif args.sweep == "noise":
         kw.pop("method", None)
-        rows = sysid.sweep_noise(data, lengths, method=args.method, dt=args.dt, **kw)
+        rows = sysid.sweep_noise(data, lengths, method=common["method"], dt=common["dt"], **kw)
         plot_training_length(rows, out / "error_vs_training_length_noise.png")
     else:
         rows = sysid.sweep_sample_time(data, [0.01, 0.02, 0.03, 0.05, 0.08, 0.1], **kw)
