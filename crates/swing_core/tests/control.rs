@@ -7,10 +7,9 @@
 #![allow(clippy::needless_range_loop)]
 
 use nalgebra::{DMatrix, DVector};
-use swing_core::control::lqr::{
-    c2d_zoh, care, dare, sampled_lqr, LqrController, LqrSettings, PendulumParams,
-};
+use swing_core::control::lqr::{LqrController, LqrSettings, PendulumParams};
 use swing_core::control::mpc::{DisturbanceModel, MpcController, MpcSettings, QpSolverKind};
+use swing_core::control::riccati::{c2d_zoh, care, dare, sampled_lqr};
 use swing_core::control::{AxisState, ControlError, SwingController, TickKind};
 use swing_core::sysid::LinearModel;
 

@@ -16,6 +16,7 @@ use swing_core::control::check::{self, StepCheckSettings};
 use swing_core::control::lqr::{self, LqrController, LqrSettings, PendulumParams};
 use swing_core::control::mpc::timing::tick_timing;
 use swing_core::control::mpc::{MpcController, MpcSettings};
+use swing_core::control::riccati;
 use swing_core::control::{AxisState, ControlError, SwingController, TickInfo, TickKind};
 use swing_core::sysid::LinearModel;
 
@@ -301,7 +302,7 @@ type Riccati = fn(
     &DMatrix<f64>,
     &DMatrix<f64>,
     &DMatrix<f64>,
-) -> Result<lqr::RiccatiSolution, ControlError>;
+) -> Result<riccati::RiccatiSolution, ControlError>;
 
 fn riccati<'py>(
     py: Python<'py>,
@@ -330,7 +331,7 @@ fn care<'py>(
     q: PyReadonlyArray2<'py, f64>,
     r: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
-    riccati(py, lqr::care, a, b, q, r)
+    riccati(py, riccati::care, a, b, q, r)
 }
 
 /// Discrete algebraic Riccati equation: returns (K, P) with u = −Kx.
@@ -342,7 +343,7 @@ fn dare<'py>(
     q: PyReadonlyArray2<'py, f64>,
     r: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
-    riccati(py, lqr::dare, a, b, q, r)
+    riccati(py, riccati::dare, a, b, q, r)
 }
 
 /// Time `n_ticks` MPC ticks in Rust (closed loop on the model itself; constrained: only

@@ -13,10 +13,12 @@ use crate::error::{Categorized, Category};
 pub mod check;
 pub mod lqr;
 pub mod mpc;
+pub mod riccati;
 
 pub use check::{mpc_step_check, step_check_with, StepCheck, StepCheckSettings};
-pub use lqr::{care, dare, LqrController, LqrSettings, PendulumParams, RiccatiSolution};
+pub use lqr::{LqrController, LqrSettings, PendulumParams};
 pub use mpc::{MpcController, MpcSettings, QpSolverKind};
+pub use riccati::{care, dare, RiccatiSolution};
 
 /// Measured state of one controlled horizontal axis (North or East).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
