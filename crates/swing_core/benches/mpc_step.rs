@@ -12,14 +12,15 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use swing_core::control::lqr::{pendulum_delay_model, PendulumParams};
 use swing_core::control::mpc::timing::{tick_timing, ModelPlant};
 use swing_core::control::mpc::{MpcController, MpcSettings, QpSolverKind};
 use swing_core::control::{AxisState, SwingController, TickKind};
+use swing_core::plant::PendulumModel;
 use swing_core::sysid::LinearModel;
+use swing_core::testing::pendulum_delay_model;
 
 fn model(axes: usize) -> LinearModel {
-    let p = PendulumParams {
+    let p = PendulumModel {
         m_q: 0.952,
         m_p: 0.2,
         l: 1.0,

@@ -15,6 +15,7 @@ pub mod error;
 pub mod plant;
 pub mod sim;
 pub mod sysid;
+pub mod testing;
 
 pub use config::ConfigError;
 pub use error::{Categorized, Category};

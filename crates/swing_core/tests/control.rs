@@ -7,16 +7,18 @@
 #![allow(clippy::needless_range_loop)]
 
 use nalgebra::{DMatrix, DVector};
-use swing_core::control::lqr::{LqrController, LqrSettings, PendulumParams};
+use swing_core::control::lqr::{LqrController, LqrSettings};
 use swing_core::control::mpc::{DisturbanceModel, MpcController, MpcSettings, QpSolverKind};
 use swing_core::control::riccati::{c2d_zoh, care, dare, sampled_lqr};
 use swing_core::control::{AxisState, ControlError, SwingController, TickKind};
+use swing_core::plant::PendulumModel;
 use swing_core::sysid::LinearModel;
+use swing_core::testing::delay_model;
 
 const TS: f64 = 0.03;
 
-fn params(m_p: f64, l: f64) -> PendulumParams {
-    PendulumParams {
+fn params(m_p: f64, l: f64) -> PendulumModel {
+    PendulumModel {
         m_q: 0.952,
         m_p,
         l,
@@ -121,14 +123,14 @@ fn sampled_lqr_gain_tends_to_the_continuous_gain() {
 
 /// Simulate the continuous 3-state pendulum under a controller with ZOH at its period.
 fn simulate_pendulum(
-    p: PendulumParams,
+    p: PendulumModel,
     ctrl: &mut dyn SwingController,
     v_ref: f64,
     seconds: f64,
     accel_disturbance: f64,
 ) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     let dt = ctrl.period();
-    let (a, b) = p.continuous_model();
+    let (a, b) = p.continuous();
     let (ad, bd) = c2d_zoh(&a, &b, dt);
     let mut x = DVector::<f64>::zeros(3);
     ctrl.reset(&[AxisState::default()], &[0.0]);
@@ -179,7 +181,7 @@ fn lqr_rejects_bad_settings_and_inputs() {
     ));
     assert!(matches!(
         LqrController::new(
-            PendulumParams {
+            PendulumModel {
                 l: 0.0,
                 ..params(0.2, 1.0)
             },
@@ -211,9 +213,9 @@ fn lqr_rejects_bad_settings_and_inputs() {
 /// [v, swing, swing_rate] (one frame cannot hold a pendulum without its rate).
 fn model(m_p: f64, l: f64, q: usize) -> LinearModel {
     let p = params(m_p, l);
-    let mut m = p.delay_model(TS, q.max(2), 7).unwrap();
+    let mut m = delay_model(&p, TS, q.max(2), 7).unwrap();
     if q == 1 {
-        let (a, b) = p.continuous_model();
+        let (a, b) = p.continuous();
         let (ad, bd) = c2d_zoh(&a, &b, TS);
         m.delays = 1;
         m.states = vec!["vn".into(), "swing_n".into(), "swing_rate_n".into()];

@@ -3,11 +3,12 @@
 #![allow(clippy::needless_range_loop)]
 
 use nalgebra::{DMatrix, DVector};
+use swing_core::plant::{PendulumModel, GRAVITY};
 use swing_core::sysid::dmdc::{self, DmdcSettings};
 use swing_core::sysid::havokc::{self, HavokcSettings, HavokcSvd};
 use swing_core::sysid::metrics::{rollout_nmae, start_points, Scorer};
 use swing_core::sysid::search::{coarse_to_fine, grid_search, Grid, SearchSettings};
-use swing_core::sysid::whitebox::{self, WhiteboxParams};
+use swing_core::sysid::whitebox;
 use swing_core::sysid::{smooth, LinearModel, Offset, SysidError, Trajectory};
 use swing_core::{Categorized, Category};
 
@@ -347,7 +348,7 @@ fn fft_recovers_damped_sinusoid_frequency() {
 
 #[test]
 fn cable_length_inverts_eq_4_8() {
-    let (mq, mp, l, g): (f64, f64, f64, f64) = (0.952, 0.3, 1.3, 9.81);
+    let (mq, mp, l, g): (f64, f64, f64, f64) = (0.952, 0.3, 1.3, GRAVITY);
     let w = (g / l * (mq + mp) / mq).sqrt();
     let est = whitebox::cable_length(w / (2.0 * std::f64::consts::PI), mq, mp, g);
     assert!((est - l).abs() < 1e-12);
@@ -360,30 +361,31 @@ fn rls_recovers_total_mass() {
     let acc: Vec<f64> = (0..2000).map(|_| 0.5 * rng.next()).collect();
     let thrust: Vec<f64> = acc
         .iter()
-        .map(|a| m * (9.81 - a) + 0.05 * rng.next())
+        .map(|a| m * (GRAVITY - a) + 0.05 * rng.next())
         .collect();
-    let est = whitebox::rls_mass(&thrust, &acc, 9.81, 1.0, 1.0).unwrap();
+    let est = whitebox::rls_mass(&thrust, &acc, GRAVITY, 1.0, 1.0).unwrap();
     assert!((est.last().unwrap() - m).abs() < 2e-3);
 }
 
 #[test]
 fn whitebox_delay_form_is_exact_for_the_three_state_model() {
-    let params = WhiteboxParams {
-        payload_mass: 0.3,
-        length: 0.8,
-        friction: 0.01,
+    let params = PendulumModel {
+        m_p: 0.3,
+        l: 0.8,
+        c: 0.01,
         ..Default::default()
     };
     let dt = 0.03;
     let (ad, bd) = params.discrete(dt);
     let model = whitebox::model(&params, 1, dt, None).unwrap();
-    let mut s = nalgebra::Vector3::new(0.2, -0.1, 0.05);
+    // s = [v, θ, θ̇]
+    let mut s = DVector::from_column_slice(&[0.2, 0.05, -0.1]);
     let mut rng = Rng(2);
     let us: Vec<f64> = (0..300).map(|_| rng.next()).collect();
     let mut y = Vec::new();
     for u in &us {
-        y.push((s[0], s[2]));
-        s = ad * s + bd * *u;
+        y.push((s[0], s[1]));
+        s = &ad * &s + &bd * *u;
     }
     // History: y_0 (oldest), y_1; predict y_2 … from inputs u_1 …
     let hist = [y[0].0, y[0].1, y[1].0, y[1].1];
@@ -396,20 +398,17 @@ fn whitebox_delay_form_is_exact_for_the_three_state_model() {
     // sit on the imaginary axis; the discrete model's spectral radius is ≤ 1.
     assert!(model.spectral_radius().unwrap() <= 1.0 + 1e-9);
     // Swing frequency of the continuous model equals eq. 4.8 (frictionless).
-    let p0 = WhiteboxParams {
-        friction: 0.0,
-        ..params.clone()
-    };
+    let p0 = PendulumModel { c: 0.0, ..params };
     let (a, _) = p0.continuous();
-    let w2 = -a[(1, 2)];
-    let expect = 9.81 / 0.8 * (0.952 + 0.3) / 0.952;
+    let w2 = -a[(2, 1)];
+    let expect = GRAVITY / 0.8 * (0.952 + 0.3) / 0.952;
     assert!((w2 - expect).abs() < 1e-12);
 }
 
 #[test]
 fn whitebox_two_axes_are_decoupled_copies() {
-    let m1 = whitebox::model(&WhiteboxParams::default(), 1, 0.03, None).unwrap();
-    let m2 = whitebox::model(&WhiteboxParams::default(), 2, 0.03, None).unwrap();
+    let m1 = whitebox::model(&PendulumModel::default(), 1, 0.03, None).unwrap();
+    let m2 = whitebox::model(&PendulumModel::default(), 2, 0.03, None).unwrap();
     assert_eq!(m2.order(), 8);
     // North v row: its own v/θ coefficients equal the one-axis model's, the East ones are 0.
     assert_eq!(m2.a[(0, 0)], m1.a[(0, 0)]);

@@ -13,12 +13,14 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use serde::Deserialize;
 use swing_core::control::check::{self, StepCheckSettings};
-use swing_core::control::lqr::{self, LqrController, LqrSettings, PendulumParams};
+use swing_core::control::lqr::{LqrController, LqrSettings};
 use swing_core::control::mpc::timing::tick_timing;
 use swing_core::control::mpc::{MpcController, MpcSettings};
 use swing_core::control::riccati;
 use swing_core::control::{AxisState, ControlError, SwingController, TickInfo, TickKind};
+use swing_core::plant::PendulumModel;
 use swing_core::sysid::LinearModel;
+use swing_core::testing::pendulum_delay_model;
 
 use crate::errors::to_py;
 
@@ -228,7 +230,7 @@ impl PyLqr {
         settings: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
         let s: LqrSettings = settings_from(py, settings)?;
-        let p = PendulumParams { m_q, m_p, l, c };
+        let p = PendulumModel { m_q, m_p, l, c };
         Ok(Self {
             inner: LqrController::new(p, axes, s).map_err(to_py)?,
         })
@@ -386,8 +388,8 @@ fn pendulum_model_json(
     axes: usize,
     seed: u64,
 ) -> PyResult<String> {
-    let p = PendulumParams { m_q, m_p, l, c };
-    let m = lqr::pendulum_delay_model(&p, dt, delays, axes, seed).map_err(to_py)?;
+    let p = PendulumModel { m_q, m_p, l, c };
+    let m = pendulum_delay_model(&p, dt, delays, axes, seed).map_err(to_py)?;
     m.to_json().map_err(to_py)
 }
 

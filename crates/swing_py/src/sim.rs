@@ -3,9 +3,10 @@
 use numpy::{IntoPyArray, PyArray1};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use swing_core::control::lqr::{LqrController, LqrSettings, PendulumParams};
+use swing_core::control::lqr::{LqrController, LqrSettings};
 use swing_core::control::mpc::{MpcController, MpcSettings};
 use swing_core::control::px4::AxisSetpoint;
+use swing_core::plant::PendulumModel;
 use swing_core::sim::{Scenario, Simulator, Trace};
 use swing_core::sysid::LinearModel;
 use swing_core::ConfigError;
@@ -285,7 +286,7 @@ impl PySimulator {
             Some(t) => parse_settings::<LqrSettings>(t, "lqr")?,
             None => LqrSettings::default(),
         };
-        let params = PendulumParams { m_q, m_p, l, c };
+        let params = PendulumModel { m_q, m_p, l, c };
         let lqr = LqrController::new(params, axes, settings).map_err(to_py)?;
         self.inner
             .attach_controller(Box::new(lqr), engage_at, budget)

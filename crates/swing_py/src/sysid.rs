@@ -7,11 +7,12 @@
 use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyList;
+use swing_core::plant::{PendulumModel, GRAVITY};
 use swing_core::sysid::dmdc::{self, DmdcSettings};
 use swing_core::sysid::havokc::{self, HavokcSettings};
 use swing_core::sysid::metrics::rollout_nmae;
 use swing_core::sysid::search::{coarse_to_fine, grid_search, Grid, Method, SearchSettings};
-use swing_core::sysid::whitebox::{self, WhiteboxParams};
+use swing_core::sysid::whitebox;
 use swing_core::sysid::{smooth, LinearModel, Offset, SysidError, Trajectory};
 use swing_core::Category;
 
@@ -273,7 +274,7 @@ fn sysid_check_model(model_json: &str) -> PyResult<(String, f64)> {
 /// White-box model (eq. 5.7, stable sign, ZOH, exact q = 2 delay form) for `axes` axes.
 #[pyfunction]
 #[pyo3(signature = (states, inputs, *, payload_mass, length, vehicle_mass=0.952, friction=0.0,
-    gravity=9.81, dt=0.03, frequency_hz=None, x=None, u=None, offset="none"))]
+    gravity=GRAVITY, dt=0.03, frequency_hz=None, x=None, u=None, offset="none"))]
 #[allow(clippy::too_many_arguments)]
 fn sysid_whitebox(
     states: Vec<String>,
@@ -289,12 +290,19 @@ fn sysid_whitebox(
     u: Option<&Bound<'_, PyAny>>,
     offset: &str,
 ) -> PyResult<String> {
-    let params = WhiteboxParams {
-        vehicle_mass,
-        payload_mass,
-        length,
-        friction,
-        gravity,
+    if gravity != GRAVITY {
+        return Err(raise(
+            Category::Config,
+            format!(
+                "gravity: the white-box model uses the plant's g = {GRAVITY} m/s² (got {gravity})"
+            ),
+        ));
+    }
+    let params = PendulumModel {
+        m_q: vehicle_mass,
+        m_p: payload_mass,
+        l: length,
+        c: friction,
     };
     let axes = inputs.len();
     let model = whitebox::model(&params, axes, dt, frequency_hz).map_err(to_py)?;
@@ -323,13 +331,14 @@ fn sysid_fft_peak(signal: &Bound<'_, PyAny>, dt: f64, f_min: f64, f_max: f64) ->
 
 /// Cable length [m] from the swing frequency [Hz] (eq. 4.8).
 #[pyfunction]
+#[pyo3(signature = (freq_hz, vehicle_mass, payload_mass, gravity=GRAVITY))]
 fn sysid_cable_length(freq_hz: f64, vehicle_mass: f64, payload_mass: f64, gravity: f64) -> f64 {
     whitebox::cable_length(freq_hz, vehicle_mass, payload_mass, gravity)
 }
 
 /// RLS total-mass estimates after each sample from vertical thrust and down acceleration.
 #[pyfunction]
-#[pyo3(signature = (thrust_vertical, acc_down, *, gravity=9.81, forgetting=1.0, initial=1.0))]
+#[pyo3(signature = (thrust_vertical, acc_down, *, gravity=GRAVITY, forgetting=1.0, initial=1.0))]
 fn sysid_rls_mass<'py>(
     py: Python<'py>,
     thrust_vertical: &Bound<'py, PyAny>,

@@ -16,7 +16,7 @@ pub mod mpc;
 pub mod riccati;
 
 pub use check::{mpc_step_check, step_check_with, StepCheck, StepCheckSettings};
-pub use lqr::{LqrController, LqrSettings, PendulumParams};
+pub use lqr::{LqrController, LqrSettings};
 pub use mpc::{MpcController, MpcSettings, QpSolverKind};
 pub use riccati::{care, dare, RiccatiSolution};
 
