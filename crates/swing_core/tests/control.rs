@@ -10,7 +10,7 @@ use nalgebra::{DMatrix, DVector};
 use swing_core::control::lqr::{LqrController, LqrSettings};
 use swing_core::control::mpc::{DisturbanceModel, MpcController, MpcSettings, QpSolverKind};
 use swing_core::control::riccati::{c2d_zoh, care, dare, sampled_lqr};
-use swing_core::control::{AxisState, ControlError, SwingController, TickKind};
+use swing_core::control::{AxisState, ControlError, LinearPlant, SwingController, TickKind};
 use swing_core::plant::PendulumModel;
 use swing_core::sysid::LinearModel;
 use swing_core::testing::delay_model;
@@ -226,65 +226,8 @@ fn model(m_p: f64, l: f64, q: usize) -> LinearModel {
     m
 }
 
-/// Step the identified model itself as the plant (an exact linear model), with an additive
-/// constant disturbance on the input channel.
-struct LinearPlant {
-    m: LinearModel,
-    z: DVector<f64>,
-}
-
-impl LinearPlant {
-    fn new(m: &LinearModel) -> Self {
-        Self {
-            z: DVector::zeros(m.a.nrows()),
-            m: m.clone(),
-        }
-    }
-    fn state(&self) -> Vec<AxisState> {
-        let n = self.m.states.len();
-        let axes = self.m.inputs.len();
-        (0..axes)
-            .map(|a| {
-                let iv = self
-                    .m
-                    .states
-                    .iter()
-                    .position(|s| s == ["vn", "ve"][a])
-                    .unwrap();
-                let is = self
-                    .m
-                    .states
-                    .iter()
-                    .position(|s| s == ["swing_n", "swing_e"][a])
-                    .unwrap();
-                let rate = match self
-                    .m
-                    .states
-                    .iter()
-                    .position(|s| s == ["swing_rate_n", "swing_rate_e"][a])
-                {
-                    Some(ir) => self.z[ir],
-                    None => (self.z[is] - self.z[is + n]) / self.m.dt,
-                };
-                AxisState {
-                    v: self.z[iv],
-                    swing: self.z[is],
-                    swing_rate: rate,
-                }
-            })
-            .collect()
-    }
-    fn step(&mut self, u: &[f64], dist: &[f64]) {
-        let ud: Vec<f64> = u
-            .iter()
-            .zip(dist)
-            .zip(&self.m.input_mean)
-            .map(|((a, b), mu)| a + b - mu)
-            .collect();
-        self.z = &self.m.a * &self.z + &self.m.b * DVector::from_vec(ud) + &self.m.c;
-    }
-}
-
+/// Fly `ctrl` on the identified model itself as the plant ([`LinearPlant`], an exact linear
+/// model), with an additive constant disturbance `dist` on the input channel.
 fn run_linear(
     ctrl: &mut MpcController,
     plant: &mut LinearPlant,
@@ -299,7 +242,8 @@ fn run_linear(
     for k in 0..steps {
         let st = plant.state();
         let info = ctrl.step(&st, &refs(k), &mut u).unwrap();
-        plant.step(&u, dist);
+        let disturbed: Vec<f64> = u.iter().zip(dist).map(|(a, b)| a + b).collect();
+        plant.step(&disturbed);
         us.push(u.clone());
         vs.push(plant.state().iter().map(|s| s.v).collect());
         kinds.push(info.kind);
@@ -324,7 +268,7 @@ fn mpc_tracks_a_step_without_offset_under_a_constant_input_disturbance() {
                 ..Default::default()
             };
             let mut ctrl = MpcController::new(&m, s).unwrap();
-            let mut plant = LinearPlant::new(&m);
+            let mut plant = LinearPlant::new(&m).unwrap();
             let refs = |k: usize| vec![if k > 10 { 2.0 } else { 0.0 }];
             // 6000 ticks (3 min): the default swing disturbance adapts slowly on purpose.
             let (_, vs, _) = run_linear(&mut ctrl, &mut plant, &refs, &[0.4], 6000);
@@ -358,7 +302,7 @@ fn velocity_only_disturbance_leaves_an_offset_for_an_input_disturbance() {
     let mut ctrl = MpcController::new(&m, s).unwrap();
     let (_, vs, _) = run_linear(
         &mut ctrl,
-        &mut LinearPlant::new(&m),
+        &mut LinearPlant::new(&m).unwrap(),
         &|_| vec![2.0],
         &[0.4],
         1500,
@@ -375,7 +319,7 @@ fn two_axis_mpc_tracks_both_axes_without_offset() {
     let two = stack_two_axes(&one);
     let mut ctrl = MpcController::new(&two, MpcSettings::default()).unwrap();
     assert_eq!(ctrl.axes(), 2);
-    let mut plant = LinearPlant::new(&two);
+    let mut plant = LinearPlant::new(&two).unwrap();
     let (_, vs, _) = run_linear(
         &mut ctrl,
         &mut plant,
@@ -438,8 +382,20 @@ fn inactive_bounds_give_exactly_the_unconstrained_law() {
         let mut c1 = MpcController::new(&m, free).unwrap();
         let mut c2 = MpcController::new(&m, loose).unwrap();
         let refs = |k: usize| vec![if k < 100 { 1.0 } else { -0.5 }];
-        let (u1, _, _) = run_linear(&mut c1, &mut LinearPlant::new(&m), &refs, &[0.1], 300);
-        let (u2, _, k2) = run_linear(&mut c2, &mut LinearPlant::new(&m), &refs, &[0.1], 300);
+        let (u1, _, _) = run_linear(
+            &mut c1,
+            &mut LinearPlant::new(&m).unwrap(),
+            &refs,
+            &[0.1],
+            300,
+        );
+        let (u2, _, k2) = run_linear(
+            &mut c2,
+            &mut LinearPlant::new(&m).unwrap(),
+            &refs,
+            &[0.1],
+            300,
+        );
         assert!(k2.iter().all(|k| *k == TickKind::Unconstrained));
         for (a, b) in u1.iter().zip(&u2) {
             assert!((a[0] - b[0]).abs() <= 1e-9);
@@ -462,7 +418,7 @@ fn active_bounds_are_respected_and_both_solvers_agree() {
         let mut c = MpcController::new(&m, s).unwrap();
         let (us, vs, kinds) = run_linear(
             &mut c,
-            &mut LinearPlant::new(&m),
+            &mut LinearPlant::new(&m).unwrap(),
             &|_| vec![3.0],
             &[0.0],
             600,
@@ -695,7 +651,7 @@ fn predicted_trajectory_matches_an_open_loop_rollout() {
     let np = s.horizon;
     let nc = s.control_horizon;
     let mut ctrl = MpcController::new(&m, s).unwrap();
-    let mut plant = LinearPlant::new(&m);
+    let mut plant = LinearPlant::new(&m).unwrap();
     let (_, _, _) = run_linear(&mut ctrl, &mut plant, &|_| vec![1.0], &[0.0], 20);
     let st = plant.state();
     let mut u = [0.0];
@@ -792,7 +748,7 @@ fn mpc_and_lqr_ticks_allocate_nothing() {
         ),
     ] {
         let mut ctrl = MpcController::new(&m, s).unwrap();
-        let mut plant = LinearPlant::new(&m);
+        let mut plant = LinearPlant::new(&m).unwrap();
         ctrl.reset(&plant.state(), &[0.0]);
         let mut constrained = 0;
         for k in 0..300 {
@@ -805,7 +761,7 @@ fn mpc_and_lqr_ticks_allocate_nothing() {
             if info.unwrap().kind == TickKind::Constrained {
                 constrained += 1;
             }
-            plant.step(&u, &[0.0]);
+            plant.step(&u);
         }
         assert_eq!(constrained > 0, must_constrain);
     }
@@ -934,7 +890,7 @@ fn step_check_on_its_own_model_matches_an_independent_loop() {
     let r = mpc_step_check(&m, MpcSettings::default(), &m, &check).unwrap();
     // Reference: the same controller and plant stepped by this file's own loop.
     let mut ctrl = MpcController::new(&m, MpcSettings::default()).unwrap();
-    let mut plant = LinearPlant::new(&m);
+    let mut plant = LinearPlant::new(&m).unwrap();
     let ticks = (check.duration / TS).round() as usize;
     let at = (check.t_step / TS).round() as usize;
     let refs = move |k: usize| vec![if k >= at { 1.5 } else { 0.0 }];
