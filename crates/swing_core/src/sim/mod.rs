@@ -2,6 +2,8 @@
 
 pub mod runner;
 pub mod scenario;
+mod supervisor;
+mod ticker;
 pub mod trace;
 
 pub use runner::{SimError, Simulator};
