@@ -6,6 +6,9 @@ import numpy as np
 import numpy.typing as npt
 
 __version__: str
+GRAVITY: float
+TRACE_COLUMNS: tuple[str, ...]
+STATE_KEYS: tuple[str, ...]
 
 # --- simulation -----------------------------------------------------------------------
 
@@ -105,7 +108,7 @@ def sysid_whitebox(
     length: float,
     vehicle_mass: float = 0.952,
     friction: float = 0.0,
-    gravity: float = 9.81,
+    gravity: float = 9.80665,
     dt: float = 0.03,
     frequency_hz: float | None = None,
     x: npt.NDArray[np.float64] | None = None,
@@ -116,13 +119,13 @@ def sysid_fft_peak(
     signal: npt.NDArray[np.float64], dt: float, f_min: float, f_max: float
 ) -> float: ...
 def sysid_cable_length(
-    freq_hz: float, vehicle_mass: float, payload_mass: float, gravity: float
+    freq_hz: float, vehicle_mass: float, payload_mass: float, gravity: float = 9.80665
 ) -> float: ...
 def sysid_rls_mass(
     thrust_vertical: npt.NDArray[np.float64],
     acc_down: npt.NDArray[np.float64],
     *,
-    gravity: float = 9.81,
+    gravity: float = 9.80665,
     forgetting: float = 1.0,
     initial: float = 1.0,
 ) -> npt.NDArray[np.float64]: ...

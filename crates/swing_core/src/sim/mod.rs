@@ -8,4 +8,4 @@ pub mod trace;
 
 pub use runner::{SimError, Simulator};
 pub use scenario::{NoiseParams, RandomSteps, Scenario, SetpointEntry};
-pub use trace::Trace;
+pub use trace::{StateExtras, Trace, TraceRow, STATE_KEYS, TRACE_COLUMNS};

@@ -14,7 +14,7 @@ use thiserror::Error;
 use super::scenario::{Scenario, SetpointEntry};
 use super::supervisor::{ControllerSupervisor, TickInputs};
 use super::ticker::Ticker;
-use super::trace::{Trace, BASE_COLUMNS, DOUBLE_COLUMNS};
+use super::trace::{StateExtras, Trace, TraceRow, DOUBLE_COLUMNS, STATE_KEYS, TRACE_COLUMNS};
 use crate::config::ConfigError;
 use crate::control::px4::{AxisSetpoint, Px4Cascade, Setpoint};
 use crate::control::SwingController;
@@ -122,7 +122,7 @@ impl Simulator {
             p.initial_swing_e,
         );
         state.project(model.links());
-        let mut names: Vec<&str> = BASE_COLUMNS.to_vec();
+        let mut names: Vec<&str> = TRACE_COLUMNS.to_vec();
         if sc.payload.kind == PayloadKind::Double {
             names.extend(DOUBLE_COLUMNS);
         }
@@ -409,7 +409,8 @@ impl Simulator {
         }
     }
 
-    fn log_row(&mut self) {
+    /// The current sample of every trace column (what the next logged row would hold).
+    pub fn sample(&self) -> TraceRow {
         let s = &self.state;
         let (roll, pitch, yaw) = UnitQuaternion::from_quaternion(s.att).euler_angles();
         let truth = self.true_swing();
@@ -421,45 +422,75 @@ impl Simulator {
         };
         let mut vel_sp = self.fc.vel_sp;
         self.supervisor.override_velocity(&mut vel_sp);
-        let r = &mut self.row;
-        let vals = [
-            self.step as f64 * self.h,
-            s.pos.x,
-            s.pos.y,
-            s.pos.z,
-            s.vel.x,
-            s.vel.y,
-            s.vel.z,
+        TraceRow {
+            t: self.step as f64 * self.h,
+            pn: s.pos.x,
+            pe: s.pos.y,
+            pd: s.pos.z,
+            vn: s.vel.x,
+            ve: s.vel.y,
+            vd: s.vel.z,
             roll,
             pitch,
             yaw,
-            meas[0],
-            meas[1],
-            truth[2],
-            truth[3],
-            self.fc.acc_sp.x,
-            self.fc.acc_sp.y,
-            self.fc.acc_sp.z,
-            vel_sp.x,
-            vel_sp.y,
-            vel_sp.z,
-            s.thrust.sum(),
-            self.wind_now.x,
-            self.wind_now.y,
-            self.wind_now.z,
-            truth[0],
-            truth[1],
-            payload.x,
-            payload.y,
-            payload.z,
-            self.supervisor.active() as u8 as f64,
-            self.supervisor.fell_back() as u8 as f64,
-        ];
-        r[..vals.len()].copy_from_slice(&vals);
+            swing_n: meas[0],
+            swing_e: meas[1],
+            swing_rate_n: truth[2],
+            swing_rate_e: truth[3],
+            acc_sp_n: self.fc.acc_sp.x,
+            acc_sp_e: self.fc.acc_sp.y,
+            acc_sp_d: self.fc.acc_sp.z,
+            vel_sp_n: vel_sp.x,
+            vel_sp_e: vel_sp.y,
+            vel_sp_d: vel_sp.z,
+            thrust: s.thrust.sum(),
+            wind_n: self.wind_now.x,
+            wind_e: self.wind_now.y,
+            wind_d: self.wind_now.z,
+            swing_true_n: truth[0],
+            swing_true_e: truth[1],
+            payload_pn: payload.x,
+            payload_pe: payload.y,
+            payload_pd: payload.z,
+            ctrl_active: self.supervisor.active() as u8 as f64,
+            fallback: self.supervisor.fell_back() as u8 as f64,
+        }
+    }
+
+    /// The current state as ([`STATE_KEYS`] name, value) pairs: trace columns of
+    /// [`Self::sample`] plus the attitude quaternion and body rates ([`StateExtras`]).
+    pub fn state_snapshot(&self) -> Vec<(&'static str, f64)> {
+        let row = self.sample();
+        let s = &self.state;
+        let extras = StateExtras {
+            q0: s.att.w,
+            q1: s.att.i,
+            q2: s.att.j,
+            q3: s.att.k,
+            p: s.rate.x,
+            q: s.rate.y,
+            r: s.rate.z,
+        };
+        STATE_KEYS
+            .iter()
+            .map(|k| {
+                let v = row.get(k).or_else(|| extras.get(k));
+                (
+                    *k,
+                    v.expect("every state key is a trace column or a state extra"),
+                )
+            })
+            .collect()
+    }
+
+    fn log_row(&mut self) {
+        let vals = self.sample().values();
+        self.row[..vals.len()].copy_from_slice(&vals);
         if self.model.links() == 2 {
+            let s = &self.state;
             let [s2n, s2e, _, _] = swing_angles(&s.n[1], &s.ndot[1]);
-            r[vals.len()] = s2n;
-            r[vals.len() + 1] = s2e;
+            self.row[vals.len()] = s2n;
+            self.row[vals.len() + 1] = s2e;
         }
         self.trace.push(&self.row);
     }
