@@ -7,5 +7,5 @@ mod ticker;
 pub mod trace;
 
 pub use runner::{SimError, Simulator};
-pub use scenario::{NoiseParams, RandomSteps, Scenario, SetpointEntry};
+pub use scenario::{Axes, NoiseParams, RandomSteps, Scenario, SetpointEntry};
 pub use trace::{StateExtras, Trace, TraceRow, STATE_KEYS, TRACE_COLUMNS};

@@ -106,11 +106,7 @@ impl Simulator {
             )
             .into());
         }
-        let believed = if sc.controller.hover_thrust > 0.0 {
-            sc.controller.hover_thrust
-        } else {
-            hover_total
-        };
+        let believed = sc.controller.hover_thrust.unwrap_or(hover_total);
         let mut fc = Px4Cascade::new(sc.controller.clone(), believed);
         fc.trim_collective(hover_total);
         let start = Vector3::from(sc.start);
@@ -301,12 +297,8 @@ impl Simulator {
         while self.next_entry < self.schedule.len() && self.schedule[self.next_entry].t <= t {
             let e = self.schedule[self.next_entry].clone();
             for i in 0..3 {
-                if let Some((mode, v)) = e.axis(i) {
-                    self.sp.axes[i] = match mode {
-                        'p' => AxisSetpoint::Position(v),
-                        'v' => AxisSetpoint::Velocity(v),
-                        _ => AxisSetpoint::Acceleration(v),
-                    };
+                if let Some(sp) = e.axis(i) {
+                    self.sp.axes[i] = sp;
                 }
             }
             if let Some(y) = e.yaw {
