@@ -776,85 +776,9 @@ fn mpc_and_lqr_ticks_allocate_nothing() {
     assert_eq!(n, 0);
 }
 
-/// Tuning table (run with `--ignored --nocapture`): 2 m/s step on the exact pendulum for
-/// the seed's payload range, MPC weight sets and the LQR for reference.
-#[test]
-#[ignore]
-fn tuning_report() {
-    let sets: Vec<(&str, MpcSettings)> = vec![
-        ("default", MpcSettings::default()),
-        (
-            "sr1",
-            MpcSettings {
-                w_swing_rate: 1.0,
-                ..Default::default()
-            },
-        ),
-        (
-            "sr3",
-            MpcSettings {
-                w_swing_rate: 3.0,
-                ..Default::default()
-            },
-        ),
-        (
-            "sr2 du0.7",
-            MpcSettings {
-                w_acc_rate: 0.7,
-                ..Default::default()
-            },
-        ),
-        (
-            "sr2 du1.5",
-            MpcSettings {
-                w_acc_rate: 1.5,
-                ..Default::default()
-            },
-        ),
-        (
-            "sr2 Np70",
-            MpcSettings {
-                horizon: 70,
-                ..Default::default()
-            },
-        ),
-    ];
-    let metrics = |vs: &[f64], ss: &[f64], dt: f64| {
-        let peak = ss.iter().map(|x| x.abs()).fold(0.0, f64::max).to_degrees();
-        let iae = ss.iter().map(|x| x.abs()).sum::<f64>() * dt * 57.2958;
-        let rise = vs
-            .iter()
-            .position(|v| *v >= 1.8)
-            .map(|k| k as f64 * dt)
-            .unwrap_or(f64::NAN);
-        let over = (vs.iter().cloned().fold(f64::MIN, f64::max) - 2.0) / 2.0 * 100.0;
-        let settle = ss
-            .iter()
-            .rposition(|x| x.abs() > 1f64.to_radians())
-            .map(|k| (k + 1) as f64 * dt)
-            .unwrap_or(0.0);
-        format!("peak {peak:5.1}°  IAE {iae:6.2}°s  rise90 {rise:5.2}s  overshoot {over:5.1}%  swing<1° after {settle:5.2}s")
-    };
-    for l in [0.5, 1.0, 2.0] {
-        for m_p in [0.1, 0.3] {
-            let p = params(m_p, l);
-            let m = model(m_p, l, 2);
-            println!("l = {l} m, m_p = {m_p} kg");
-            for (name, s) in &sets {
-                let mut c = MpcController::new(&m, s.clone()).unwrap();
-                let (vs, ss, _) = simulate_pendulum(p, &mut c, 2.0, 15.0, 0.0);
-                println!("  MPC {name:<18} {}", metrics(&vs, &ss, TS));
-            }
-            let mut lqr = LqrController::new(p, 1, LqrSettings::default()).unwrap();
-            let (vs, ss, _) = simulate_pendulum(p, &mut lqr, 2.0, 15.0, 0.0);
-            println!("  LQR {:<18} {}", "seed weights", metrics(&vs, &ss, 0.02));
-        }
-    }
-}
-
 #[test]
 fn a_horizon_shorter_than_the_swing_period_underdamps_a_two_metre_cable() {
-    // Issue 4: with one fixed tuning, the prediction horizon must span a swing period of
+    // With one fixed tuning, the prediction horizon must span a swing period of
     // the longest cable (≈ 2.5–2.8 s for 2 m); 1.8 s (60 ticks) leaves it under-damped.
     let p = params(0.1, 2.0);
     let m = model(0.1, 2.0, 2);

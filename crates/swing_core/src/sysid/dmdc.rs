@@ -18,9 +18,9 @@
 //! The triangular factor (budget: one fit with q = 50, 120 s at 0.03 s, F ≈ 3950 × 104, in
 //! < 5 ms on one core). Only R is needed, never Q, and any R with RᵀR = FᵀF serves (row
 //! signs drop out of U, Σ and X'V). On smooth, noise-free flight data cond(F) ≈ 1e8–1e11,
-//! so the f64 Gram FᵀF (cond squared, beyond 1/u) cannot be factored, and the former route
-//! — f64 Gram + Cholesky, falling back to a Householder QR of F — paid for both (≈ 15 ms).
-//! Now (`gram` module) FᵀF is formed in double-double arithmetic (error-free TwoProd/TwoSum,
+//! so the f64 Gram FᵀF (cond squared, beyond 1/u) cannot be factored, and a Householder QR
+//! of F is accurate but O(N·C²), over budget. Instead (`gram` module) FᵀF is formed in
+//! double-double arithmetic (error-free TwoProd/TwoSum,
 //! ≈ 106-bit significand) and factored by a double-double Cholesky; squaring the condition
 //! number is harmless at that precision, and R rounded to f64 is at least as accurate as the
 //! Householder R (backward error ≈ u‖F‖). The Gram is cheap because F is block-Hankel: along

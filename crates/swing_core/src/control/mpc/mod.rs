@@ -94,9 +94,8 @@ impl Default for MpcSettings {
             control_horizon: 20,
             w_velocity: 1.0,
             // Tuned on the thesis's experiment matrix (payload grid, wind, double pendulum,
-            // mass change; `swingrt experiment`): peak swing ≈ 6.5° against the LQR's 10°,
-            // swing IAE ≤ 0.31× PX4 PID's except the mass-change case. 2/1 (the previous
-            // default) left heavy short cables above a third of PID's swing IAE.
+            // mass change; `swingrt experiment`): a swing-rate weight well above the input-rate
+            // weight is what damps heavy payloads on short cables.
             w_swing_rate: 6.0,
             w_swing: 0.0,
             w_acc: 0.0,
@@ -108,8 +107,8 @@ impl Default for MpcSettings {
             kf_disturbance_noise: 0.02,
             // A swing disturbance that adapts as fast as the velocity one lets the estimator
             // explain a model's slow-mode mismatch as a payload force, and the loop creeps or
-            // runs away (24 of 84 seeded experiment flights with the NMAE-best model did
-            // not settle; benches/robustness.py); at 0.1 that is 9 of 84, and the wind step settles to ≤ 0.001 m/s.
+            // runs away; a tenth of the velocity disturbance's rate avoids that and still
+            // lets a wind step settle.
             kf_swing_disturbance_scale: 0.1,
             kf_measurement_noise: 0.01,
             solver: QpSolverKind::ActiveSet,
