@@ -115,3 +115,39 @@ impl AxisLayout {
         self.axes.iter().map(|a| a.suffix.as_str()).collect()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plant::PendulumModel;
+    use crate::testing::pendulum_delay_model;
+
+    #[test]
+    fn two_axis_model_maps_each_axis_and_classifies_every_state() {
+        let m = pendulum_delay_model(&PendulumModel::default(), 0.03, 2, 2, 7).unwrap();
+        let layout = AxisLayout::from_model(&m).unwrap();
+        assert_eq!(layout.len(), 2);
+        let e = &layout.axes()[1];
+        assert_eq!(
+            (e.suffix.as_str(), e.v, e.swing, e.swing_rate),
+            ("e", 1, 3, None)
+        );
+        assert_eq!(layout.classify("swing_n"), Some(Measured::Swing(0)));
+        assert_eq!(layout.classify("ve"), Some(Measured::V(1)));
+        assert_eq!(layout.classify("vd"), None);
+    }
+
+    #[test]
+    fn a_missing_axis_state_is_an_error_not_index_zero() {
+        let mut m = pendulum_delay_model(&PendulumModel::default(), 0.03, 2, 1, 7).unwrap();
+        m.states = vec!["vn".into(), "theta".into()];
+        let e = AxisLayout::from_model(&m).unwrap_err();
+        assert!(
+            matches!(e, ControlError::Model(ref s) if s.contains("swing_n")),
+            "{e}"
+        );
+        m.states = vec!["vn".into(), "swing_n".into()];
+        m.inputs = vec!["u0".into(), "u1".into(), "u2".into()];
+        assert!(AxisLayout::from_model(&m).is_err());
+    }
+}
