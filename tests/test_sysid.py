@@ -160,7 +160,7 @@ def test_whitebox_delay_form_matches_continuous_model_exactly():
     model, _ = _core.identify(*quiet, ["vn", "swing_n"], ["acc_sp_n"], settings)
     import scipy.linalg  # noqa: PLC0415
 
-    g, mq, mp, length, c = 9.81, 0.952, 0.3, 0.8, 0.01
+    g, mq, mp, length, c = _core.GRAVITY, 0.952, 0.3, 0.8, 0.01
     a = np.array(
         [
             [0, c / (length * mq), g * mp / mq],
@@ -192,8 +192,8 @@ def test_fft_recovers_frequency_and_length():
     est = _core.sysid_fft_peak(sig, 0.01, 0.1, 3.0)
     assert abs(est - f) / f < 0.005
     mq, mp, length = 0.952, 0.3, 1.0
-    w = math.sqrt(9.81 / length * (mq + mp) / mq)
-    assert abs(_core.sysid_cable_length(w / 2 / math.pi, mq, mp, 9.81) - length) < 1e-12
+    w = math.sqrt(_core.GRAVITY / length * (mq + mp) / mq)
+    assert abs(_core.sysid_cable_length(w / 2 / math.pi, mq, mp) - length) < 1e-12
 
 
 def test_nmae_hand_computed():
@@ -491,7 +491,7 @@ def test_sim_fft_length_on_free_swing(mass, length):
     t, swing = tr.columns["t"], tr.columns["swing_n"]
     keep = t > 5.0  # drop the start transient, as section 4.3.3 does
     f = _core.sysid_fft_peak(np.ascontiguousarray(swing[keep]), float(t[1] - t[0]), 0.1, 3.0)
-    est = _core.sysid_cable_length(f, 0.952, mass, 9.81)
+    est = _core.sysid_cable_length(f, 0.952, mass)
     assert abs(est - length) / length < 0.02, (f, est)
 
 

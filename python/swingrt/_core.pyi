@@ -8,12 +8,16 @@ import numpy.typing as npt
 
 __version__: str
 __all__ = [
+    "FLIGHT_COLUMNS",
+    "GRAVITY",
     "LinearModel",
     "Lqr",
     "Mpc",
     "Scenario",
+    "STATE_KEYS",
     "Search",
     "Simulator",
+    "TRACE_COLUMNS",
     "__version__",
     "care",
     "check_settings",
@@ -32,6 +36,10 @@ __all__ = [
     "sysid_smooth_quadratic",
     "whitebox_payload_mass",
 ]
+GRAVITY: float
+TRACE_COLUMNS: tuple[str, ...]
+FLIGHT_COLUMNS: tuple[str, ...]
+STATE_KEYS: tuple[str, ...]
 
 # --- simulation -----------------------------------------------------------------------
 
@@ -186,13 +194,13 @@ def sysid_fft_peak(
     signal: npt.NDArray[np.float64], dt: float, f_min: float, f_max: float
 ) -> float: ...
 def sysid_cable_length(
-    freq_hz: float, vehicle_mass: float, payload_mass: float, gravity: float
+    freq_hz: float, vehicle_mass: float, payload_mass: float, gravity: float = ...
 ) -> float: ...
 def sysid_rls_mass(
     thrust_vertical: npt.NDArray[np.float64],
     acc_down: npt.NDArray[np.float64],
     *,
-    gravity: float,
+    gravity: float = ...,
     forgetting: float = 1.0,
     initial: float = 1.0,
 ) -> npt.NDArray[np.float64]: ...

@@ -15,6 +15,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from swingrt import _core
 from swingrt.errors import DataError
 from swingrt.io.atomic import atomic_path
 from swingrt.io.flight import require
@@ -144,7 +145,7 @@ def write_ulog(
     vel = [np.interp(ts, t, col(c)) for c in ("vel_sp_n", "vel_sp_e", "vel_sp_d")]
     acc = [np.interp(ts, t, col(c)) for c in ("acc_sp_n", "acc_sp_e", "acc_sp_d")]
     # Normalised thrust vector as PX4 logs it: along the commanded specific force, hover = 0.5.
-    g = 9.80665
+    g = _core.GRAVITY
     for i, u in enumerate(us):
         f = np.array([acc[0][i], acc[1][i], acc[2][i] - g]) * (0.5 / g)
         vals = [int(u), nan, nan, nan] + [float(v[i]) for v in vel]

@@ -12,14 +12,15 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use swing_core::control::lqr::{pendulum_delay_model, PendulumParams};
-use swing_core::control::mpc::timing::{tick_timing, ModelPlant};
+use swing_core::control::mpc::timing::tick_timing;
 use swing_core::control::mpc::{MpcController, MpcSettings, QpSolverKind};
-use swing_core::control::{AxisState, SwingController, TickKind};
+use swing_core::control::{AxisState, LinearPlant, SwingController, TickKind};
+use swing_core::plant::PendulumModel;
 use swing_core::sysid::LinearModel;
+use swing_core::testing::pendulum_delay_model;
 
 fn model(axes: usize) -> LinearModel {
-    let p = PendulumParams {
+    let p = PendulumModel {
         m_q: 0.952,
         m_p: 0.2,
         l: 1.0,
@@ -42,7 +43,7 @@ fn settings(solver: QpSolverKind, constrained: bool) -> MpcSettings {
 /// Total time of `iters` timed ticks in closed loop with the model as plant.
 fn timed_ticks(m: &LinearModel, s: &MpcSettings, constrained: bool, iters: u64) -> Duration {
     let mut ctrl = MpcController::new(m, s.clone()).expect("controller");
-    let mut plant = ModelPlant::new(m);
+    let mut plant = LinearPlant::new(m).expect("plant");
     let axes = ctrl.axes();
     let mut st = vec![AxisState::default(); axes];
     let mut u = vec![0.0; axes];

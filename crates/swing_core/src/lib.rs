@@ -4,9 +4,10 @@
 //! controller ([`plant`], [`sim`], [`control::px4`]), data-driven identification of a linear
 //! model ([`sysid`]) and swing-damping control on that model ([`control`]). Pure Rust, `f64`,
 //! no Python; the PyO3 binding lives in the `swing_py` crate. Equation numbers refer to the
-//! thesis in `shared/seed/thesis.txt`.
+//! thesis (see docs/architecture.md).
 
 // Index loops mirror the equations (x_i, T_i, n_i) and read better than iterator chains here.
+#![warn(missing_docs)]
 #![allow(clippy::needless_range_loop)]
 
 pub mod config;
@@ -15,6 +16,7 @@ pub mod error;
 pub mod plant;
 pub mod sim;
 pub mod sysid;
+pub mod testing;
 
 pub use config::ConfigError;
 pub use error::{Categorized, Category};

@@ -7,17 +7,18 @@
 #![allow(clippy::needless_range_loop)]
 
 use nalgebra::{DMatrix, DVector};
-use swing_core::control::lqr::{
-    c2d_zoh, care, dare, sampled_lqr, LqrController, LqrSettings, PendulumParams,
-};
+use swing_core::control::lqr::{LqrController, LqrSettings};
 use swing_core::control::mpc::{DisturbanceModel, MpcController, MpcSettings, QpSolverKind};
-use swing_core::control::{AxisState, ControlError, SwingController, TickKind};
+use swing_core::control::riccati::{c2d_zoh, care, dare, sampled_lqr};
+use swing_core::control::{AxisState, ControlError, LinearPlant, SwingController, TickKind};
+use swing_core::plant::PendulumModel;
 use swing_core::sysid::LinearModel;
+use swing_core::testing::delay_model;
 
 const TS: f64 = 0.03;
 
-fn params(m_p: f64, l: f64) -> PendulumParams {
-    PendulumParams {
+fn params(m_p: f64, l: f64) -> PendulumModel {
+    PendulumModel {
         m_q: 0.952,
         m_p,
         l,
@@ -122,14 +123,14 @@ fn sampled_lqr_gain_tends_to_the_continuous_gain() {
 
 /// Simulate the continuous 3-state pendulum under a controller with ZOH at its period.
 fn simulate_pendulum(
-    p: PendulumParams,
+    p: PendulumModel,
     ctrl: &mut dyn SwingController,
     v_ref: f64,
     seconds: f64,
     accel_disturbance: f64,
 ) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     let dt = ctrl.period();
-    let (a, b) = p.continuous_model();
+    let (a, b) = p.continuous();
     let (ad, bd) = c2d_zoh(&a, &b, dt);
     let mut x = DVector::<f64>::zeros(3);
     ctrl.reset(&[AxisState::default()], &[0.0]);
@@ -180,7 +181,7 @@ fn lqr_rejects_bad_settings_and_inputs() {
     ));
     assert!(matches!(
         LqrController::new(
-            PendulumParams {
+            PendulumModel {
                 l: 0.0,
                 ..params(0.2, 1.0)
             },
@@ -212,9 +213,9 @@ fn lqr_rejects_bad_settings_and_inputs() {
 /// [v, swing, swing_rate] (one frame cannot hold a pendulum without its rate).
 fn model(m_p: f64, l: f64, q: usize) -> LinearModel {
     let p = params(m_p, l);
-    let mut m = p.delay_model(TS, q.max(2), 7).unwrap();
+    let mut m = delay_model(&p, TS, q.max(2), 7).unwrap();
     if q == 1 {
-        let (a, b) = p.continuous_model();
+        let (a, b) = p.continuous();
         let (ad, bd) = c2d_zoh(&a, &b, TS);
         m.delays = 1;
         m.states = vec!["vn".into(), "swing_n".into(), "swing_rate_n".into()];
@@ -225,65 +226,8 @@ fn model(m_p: f64, l: f64, q: usize) -> LinearModel {
     m
 }
 
-/// Step the identified model itself as the plant (an exact linear model), with an additive
-/// constant disturbance on the input channel.
-struct LinearPlant {
-    m: LinearModel,
-    z: DVector<f64>,
-}
-
-impl LinearPlant {
-    fn new(m: &LinearModel) -> Self {
-        Self {
-            z: DVector::zeros(m.a.nrows()),
-            m: m.clone(),
-        }
-    }
-    fn state(&self) -> Vec<AxisState> {
-        let n = self.m.states.len();
-        let axes = self.m.inputs.len();
-        (0..axes)
-            .map(|a| {
-                let iv = self
-                    .m
-                    .states
-                    .iter()
-                    .position(|s| s == ["vn", "ve"][a])
-                    .unwrap();
-                let is = self
-                    .m
-                    .states
-                    .iter()
-                    .position(|s| s == ["swing_n", "swing_e"][a])
-                    .unwrap();
-                let rate = match self
-                    .m
-                    .states
-                    .iter()
-                    .position(|s| s == ["swing_rate_n", "swing_rate_e"][a])
-                {
-                    Some(ir) => self.z[ir],
-                    None => (self.z[is] - self.z[is + n]) / self.m.dt,
-                };
-                AxisState {
-                    v: self.z[iv],
-                    swing: self.z[is],
-                    swing_rate: rate,
-                }
-            })
-            .collect()
-    }
-    fn step(&mut self, u: &[f64], dist: &[f64]) {
-        let ud: Vec<f64> = u
-            .iter()
-            .zip(dist)
-            .zip(&self.m.input_mean)
-            .map(|((a, b), mu)| a + b - mu)
-            .collect();
-        self.z = &self.m.a * &self.z + &self.m.b * DVector::from_vec(ud) + &self.m.c;
-    }
-}
-
+/// Fly `ctrl` on the identified model itself as the plant ([`LinearPlant`], an exact linear
+/// model), with an additive constant disturbance `dist` on the input channel.
 fn run_linear(
     ctrl: &mut MpcController,
     plant: &mut LinearPlant,
@@ -298,7 +242,8 @@ fn run_linear(
     for k in 0..steps {
         let st = plant.state();
         let info = ctrl.step(&st, &refs(k), &mut u).unwrap();
-        plant.step(&u, dist);
+        let disturbed: Vec<f64> = u.iter().zip(dist).map(|(a, b)| a + b).collect();
+        plant.step(&disturbed);
         us.push(u.clone());
         vs.push(plant.state().iter().map(|s| s.v).collect());
         kinds.push(info.kind);
@@ -323,7 +268,7 @@ fn mpc_tracks_a_step_without_offset_under_a_constant_input_disturbance() {
                 ..Default::default()
             };
             let mut ctrl = MpcController::new(&m, s).unwrap();
-            let mut plant = LinearPlant::new(&m);
+            let mut plant = LinearPlant::new(&m).unwrap();
             let refs = |k: usize| vec![if k > 10 { 2.0 } else { 0.0 }];
             // 6000 ticks (3 min): the default swing disturbance adapts slowly on purpose.
             let (_, vs, _) = run_linear(&mut ctrl, &mut plant, &refs, &[0.4], 6000);
@@ -357,7 +302,7 @@ fn velocity_only_disturbance_leaves_an_offset_for_an_input_disturbance() {
     let mut ctrl = MpcController::new(&m, s).unwrap();
     let (_, vs, _) = run_linear(
         &mut ctrl,
-        &mut LinearPlant::new(&m),
+        &mut LinearPlant::new(&m).unwrap(),
         &|_| vec![2.0],
         &[0.4],
         1500,
@@ -374,7 +319,7 @@ fn two_axis_mpc_tracks_both_axes_without_offset() {
     let two = stack_two_axes(&one);
     let mut ctrl = MpcController::new(&two, MpcSettings::default()).unwrap();
     assert_eq!(ctrl.axes(), 2);
-    let mut plant = LinearPlant::new(&two);
+    let mut plant = LinearPlant::new(&two).unwrap();
     let (_, vs, _) = run_linear(
         &mut ctrl,
         &mut plant,
@@ -437,8 +382,20 @@ fn inactive_bounds_give_exactly_the_unconstrained_law() {
         let mut c1 = MpcController::new(&m, free).unwrap();
         let mut c2 = MpcController::new(&m, loose).unwrap();
         let refs = |k: usize| vec![if k < 100 { 1.0 } else { -0.5 }];
-        let (u1, _, _) = run_linear(&mut c1, &mut LinearPlant::new(&m), &refs, &[0.1], 300);
-        let (u2, _, k2) = run_linear(&mut c2, &mut LinearPlant::new(&m), &refs, &[0.1], 300);
+        let (u1, _, _) = run_linear(
+            &mut c1,
+            &mut LinearPlant::new(&m).unwrap(),
+            &refs,
+            &[0.1],
+            300,
+        );
+        let (u2, _, k2) = run_linear(
+            &mut c2,
+            &mut LinearPlant::new(&m).unwrap(),
+            &refs,
+            &[0.1],
+            300,
+        );
         assert!(k2.iter().all(|k| *k == TickKind::Unconstrained));
         for (a, b) in u1.iter().zip(&u2) {
             assert!((a[0] - b[0]).abs() <= 1e-9);
@@ -461,7 +418,7 @@ fn active_bounds_are_respected_and_both_solvers_agree() {
         let mut c = MpcController::new(&m, s).unwrap();
         let (us, vs, kinds) = run_linear(
             &mut c,
-            &mut LinearPlant::new(&m),
+            &mut LinearPlant::new(&m).unwrap(),
             &|_| vec![3.0],
             &[0.0],
             600,
@@ -694,7 +651,7 @@ fn predicted_trajectory_matches_an_open_loop_rollout() {
     let np = s.horizon;
     let nc = s.control_horizon;
     let mut ctrl = MpcController::new(&m, s).unwrap();
-    let mut plant = LinearPlant::new(&m);
+    let mut plant = LinearPlant::new(&m).unwrap();
     let (_, _, _) = run_linear(&mut ctrl, &mut plant, &|_| vec![1.0], &[0.0], 20);
     let st = plant.state();
     let mut u = [0.0];
@@ -791,7 +748,7 @@ fn mpc_and_lqr_ticks_allocate_nothing() {
         ),
     ] {
         let mut ctrl = MpcController::new(&m, s).unwrap();
-        let mut plant = LinearPlant::new(&m);
+        let mut plant = LinearPlant::new(&m).unwrap();
         ctrl.reset(&plant.state(), &[0.0]);
         let mut constrained = 0;
         for k in 0..300 {
@@ -804,7 +761,7 @@ fn mpc_and_lqr_ticks_allocate_nothing() {
             if info.unwrap().kind == TickKind::Constrained {
                 constrained += 1;
             }
-            plant.step(&u, &[0.0]);
+            plant.step(&u);
         }
         assert_eq!(constrained > 0, must_constrain);
     }
@@ -819,85 +776,9 @@ fn mpc_and_lqr_ticks_allocate_nothing() {
     assert_eq!(n, 0);
 }
 
-/// Tuning table (run with `--ignored --nocapture`): 2 m/s step on the exact pendulum for
-/// the seed's payload range, MPC weight sets and the LQR for reference.
-#[test]
-#[ignore]
-fn tuning_report() {
-    let sets: Vec<(&str, MpcSettings)> = vec![
-        ("default", MpcSettings::default()),
-        (
-            "sr1",
-            MpcSettings {
-                w_swing_rate: 1.0,
-                ..Default::default()
-            },
-        ),
-        (
-            "sr3",
-            MpcSettings {
-                w_swing_rate: 3.0,
-                ..Default::default()
-            },
-        ),
-        (
-            "sr2 du0.7",
-            MpcSettings {
-                w_acc_rate: 0.7,
-                ..Default::default()
-            },
-        ),
-        (
-            "sr2 du1.5",
-            MpcSettings {
-                w_acc_rate: 1.5,
-                ..Default::default()
-            },
-        ),
-        (
-            "sr2 Np70",
-            MpcSettings {
-                horizon: 70,
-                ..Default::default()
-            },
-        ),
-    ];
-    let metrics = |vs: &[f64], ss: &[f64], dt: f64| {
-        let peak = ss.iter().map(|x| x.abs()).fold(0.0, f64::max).to_degrees();
-        let iae = ss.iter().map(|x| x.abs()).sum::<f64>() * dt * 57.2958;
-        let rise = vs
-            .iter()
-            .position(|v| *v >= 1.8)
-            .map(|k| k as f64 * dt)
-            .unwrap_or(f64::NAN);
-        let over = (vs.iter().cloned().fold(f64::MIN, f64::max) - 2.0) / 2.0 * 100.0;
-        let settle = ss
-            .iter()
-            .rposition(|x| x.abs() > 1f64.to_radians())
-            .map(|k| (k + 1) as f64 * dt)
-            .unwrap_or(0.0);
-        format!("peak {peak:5.1}°  IAE {iae:6.2}°s  rise90 {rise:5.2}s  overshoot {over:5.1}%  swing<1° after {settle:5.2}s")
-    };
-    for l in [0.5, 1.0, 2.0] {
-        for m_p in [0.1, 0.3] {
-            let p = params(m_p, l);
-            let m = model(m_p, l, 2);
-            println!("l = {l} m, m_p = {m_p} kg");
-            for (name, s) in &sets {
-                let mut c = MpcController::new(&m, s.clone()).unwrap();
-                let (vs, ss, _) = simulate_pendulum(p, &mut c, 2.0, 15.0, 0.0);
-                println!("  MPC {name:<18} {}", metrics(&vs, &ss, TS));
-            }
-            let mut lqr = LqrController::new(p, 1, LqrSettings::default()).unwrap();
-            let (vs, ss, _) = simulate_pendulum(p, &mut lqr, 2.0, 15.0, 0.0);
-            println!("  LQR {:<18} {}", "seed weights", metrics(&vs, &ss, 0.02));
-        }
-    }
-}
-
 #[test]
 fn a_horizon_shorter_than_the_swing_period_underdamps_a_two_metre_cable() {
-    // Issue 4: with one fixed tuning, the prediction horizon must span a swing period of
+    // With one fixed tuning, the prediction horizon must span a swing period of
     // the longest cable (≈ 2.5–2.8 s for 2 m); 1.8 s (60 ticks) leaves it under-damped.
     let p = params(0.1, 2.0);
     let m = model(0.1, 2.0, 2);
@@ -933,7 +814,7 @@ fn step_check_on_its_own_model_matches_an_independent_loop() {
     let r = mpc_step_check(&m, MpcSettings::default(), &m, &check).unwrap();
     // Reference: the same controller and plant stepped by this file's own loop.
     let mut ctrl = MpcController::new(&m, MpcSettings::default()).unwrap();
-    let mut plant = LinearPlant::new(&m);
+    let mut plant = LinearPlant::new(&m).unwrap();
     let ticks = (check.duration / TS).round() as usize;
     let at = (check.t_step / TS).round() as usize;
     let refs = move |k: usize| vec![if k >= at { 1.5 } else { 0.0 }];

@@ -1,5 +1,4 @@
-//! Physics checks of the plant and the closed loop against closed forms and invariants
-//! (issue 2, items 5 (i)–(vii)).
+//! Physics checks of the plant and the closed loop against closed forms and invariants.
 
 #![allow(clippy::needless_range_loop)]
 
@@ -53,7 +52,7 @@ fn mean_period(crossings: &[f64]) -> f64 {
 }
 
 #[test]
-fn i_free_swing_frequency_matches_the_free_floating_pendulum() {
+fn free_swing_frequency_matches_the_free_floating_pendulum() {
     let mq = VehicleParams::default().mass;
     for (mp, l) in [(0.1, 0.5), (0.2, 1.0), (0.3, 2.0)] {
         let model = Model::new(VehicleParams::default(), payload(mp, l));
@@ -80,7 +79,7 @@ fn i_free_swing_frequency_matches_the_free_floating_pendulum() {
 }
 
 #[test]
-fn ii_energy_is_conserved_and_the_cable_keeps_its_length() {
+fn energy_is_conserved_and_the_cable_keeps_its_length() {
     for kind in [PayloadKind::Single, PayloadKind::Double] {
         let mut p = payload(0.2, 1.0);
         p.kind = kind;
@@ -114,7 +113,7 @@ fn ii_energy_is_conserved_and_the_cable_keeps_its_length() {
 }
 
 #[test]
-fn ii_energy_falls_when_friction_and_drag_are_on() {
+fn energy_falls_when_friction_and_drag_are_on() {
     let mut p = payload(0.2, 1.0);
     p.friction = 0.01;
     p.drag = 0.01;
@@ -162,7 +161,7 @@ fn state_error(a: &PlantState, b: &PlantState) -> f64 {
 }
 
 #[test]
-fn iii_rk4_global_error_falls_sixteenfold_when_the_step_halves() {
+fn rk4_global_error_falls_sixteenfold_when_the_step_halves() {
     let t_end = 2.0;
     let reference = run_double(0.25e-3, t_end);
     let e1 = state_error(&run_double(8e-3, t_end), &reference);
@@ -178,7 +177,7 @@ fn iii_rk4_global_error_falls_sixteenfold_when_the_step_halves() {
 }
 
 #[test]
-fn iv_quaternion_stays_unit() {
+fn quaternion_stays_unit() {
     // The attitude derivative is tangent to the unit sphere for any body rate …
     let q = Quaternion::new(0.8, 0.1, -0.3, 0.5).normalize();
     let model = Model::new(VehicleParams::default(), payload(0.2, 1.0));
@@ -226,7 +225,7 @@ fn hold_error(kind: PayloadKind) -> (f64, f64) {
 }
 
 #[test]
-fn v_hover_holds_position_without_steady_state_error() {
+fn hover_holds_position_without_steady_state_error() {
     for kind in [PayloadKind::None, PayloadKind::Single] {
         let (err, speed) = hold_error(kind);
         assert!(err < 5e-3, "{kind:?}: position error {err}");
@@ -235,7 +234,7 @@ fn v_hover_holds_position_without_steady_state_error() {
 }
 
 #[test]
-fn vi_swing_period_under_px4_lies_between_free_and_pinned() {
+fn swing_period_under_px4_lies_between_free_and_pinned() {
     let sc = Scenario {
         duration: 40.0,
         ..Scenario::default_step()
@@ -265,7 +264,7 @@ fn vi_swing_period_under_px4_lies_between_free_and_pinned() {
 }
 
 #[test]
-fn vii_linearisation_around_hover_matches_the_white_box_model() {
+fn linearisation_around_hover_matches_the_white_box_model() {
     let (mp, l, c) = (0.25, 1.3, 0.004);
     let vehicle = VehicleParams::default();
     let mq = vehicle.mass;

@@ -3,24 +3,25 @@
 #![allow(clippy::needless_range_loop)]
 
 use nalgebra::{DMatrix, DVector};
+use rand::{RngExt, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use swing_core::plant::{PendulumModel, GRAVITY};
 use swing_core::sysid::dmdc::{self, DmdcSettings};
 use swing_core::sysid::havokc::{self, HavokcSettings, HavokcSvd};
 use swing_core::sysid::metrics::{rollout_nmae, start_points, Scorer};
 use swing_core::sysid::search::{coarse_to_fine, grid_search, Grid, SearchSettings};
-use swing_core::sysid::whitebox::{self, WhiteboxParams};
+use swing_core::sysid::whitebox;
 use swing_core::sysid::{smooth, LinearModel, Offset, SysidError, Trajectory};
 use swing_core::{Categorized, Category};
 
-/// SplitMix64: a tiny seeded generator so the tests need no RNG crate API.
-struct Rng(u64);
+/// Seeded uniform numbers in [−1, 1).
+struct Rng(ChaCha8Rng);
 impl Rng {
+    fn new(seed: u64) -> Self {
+        Self(ChaCha8Rng::seed_from_u64(seed))
+    }
     fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        (z >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        self.0.random_range(-1.0..1.0)
     }
 }
 
@@ -58,7 +59,7 @@ fn max_abs_diff(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
 
 #[test]
 fn dmdc_recovers_random_stable_system_at_full_rank() {
-    let mut rng = Rng(7);
+    let mut rng = Rng::new(7);
     let (n, m) = (4, 2);
     let a = stable_matrix(&mut rng, n, 0.9);
     let b = DMatrix::from_fn(n, m, |_, _| rng.next());
@@ -86,7 +87,7 @@ fn dmdc_recovers_random_stable_system_at_full_rank() {
 
 #[test]
 fn dmdc_affine_recovers_constant_term() {
-    let mut rng = Rng(11);
+    let mut rng = Rng::new(11);
     let (n, m) = (3, 1);
     let a = stable_matrix(&mut rng, n, 0.8);
     let b = DMatrix::from_fn(n, m, |_, _| rng.next());
@@ -111,7 +112,7 @@ fn dmdc_affine_recovers_constant_term() {
 fn dmdc_rank_r_system_recovered_at_p_equal_r() {
     // x lives in a 2-D subspace of R^4: x = P ξ, ξ_{k+1} = F ξ + H u. The data matrix
     // [x; u] then has rank 2 + 1 = 3 and the rank-3 fit predicts exactly.
-    let mut rng = Rng(3);
+    let mut rng = Rng::new(3);
     let p_basis = DMatrix::from_fn(4, 2, |_, _| rng.next());
     let f = stable_matrix(&mut rng, 2, 0.95);
     let h = DMatrix::from_fn(2, 1, |_, _| rng.next());
@@ -147,7 +148,7 @@ fn dmdc_rank_r_system_recovered_at_p_equal_r() {
 /// A delay system: y_{k+1} = Σ a_j y_{k−j} + b u_k (q_true = 3), plus a second state
 /// (so n = 2 like [v, swing]).
 fn delay_system(len: usize, seed: u64) -> (Vec<f64>, Vec<f64>) {
-    let mut rng = Rng(seed);
+    let mut rng = Rng::new(seed);
     let coef = [1.6, -0.9, 0.2];
     let mut y = vec![0.0; len];
     let mut u = vec![0.0; len];
@@ -305,7 +306,7 @@ fn havokc_forced_entries_and_exact_reproduction() {
 
 #[test]
 fn havokc_reproduces_random_linear_system() {
-    let mut rng = Rng(17);
+    let mut rng = Rng::new(17);
     let a = stable_matrix(&mut rng, 3, 0.9);
     let b = DMatrix::from_fn(3, 1, |_, _| rng.next());
     let (x, u) = simulate(&a, &b, &DVector::zeros(3), 500, &mut rng);
@@ -345,7 +346,7 @@ fn fft_recovers_damped_sinusoid_frequency() {
 
 #[test]
 fn cable_length_inverts_eq_4_8() {
-    let (mq, mp, l, g): (f64, f64, f64, f64) = (0.952, 0.3, 1.3, 9.81);
+    let (mq, mp, l, g): (f64, f64, f64, f64) = (0.952, 0.3, 1.3, GRAVITY);
     let w = (g / l * (mq + mp) / mq).sqrt();
     let est = whitebox::cable_length(w / (2.0 * std::f64::consts::PI), mq, mp, g);
     assert!((est - l).abs() < 1e-12);
@@ -353,35 +354,36 @@ fn cable_length_inverts_eq_4_8() {
 
 #[test]
 fn rls_recovers_total_mass() {
-    let mut rng = Rng(5);
+    let mut rng = Rng::new(5);
     let m = 1.252;
     let acc: Vec<f64> = (0..2000).map(|_| 0.5 * rng.next()).collect();
     let thrust: Vec<f64> = acc
         .iter()
-        .map(|a| m * (9.81 - a) + 0.05 * rng.next())
+        .map(|a| m * (GRAVITY - a) + 0.05 * rng.next())
         .collect();
-    let est = whitebox::rls_mass(&thrust, &acc, 9.81, 1.0, 1.0).unwrap();
+    let est = whitebox::rls_mass(&thrust, &acc, GRAVITY, 1.0, 1.0).unwrap();
     assert!((est.last().unwrap() - m).abs() < 2e-3);
 }
 
 #[test]
 fn whitebox_delay_form_is_exact_for_the_three_state_model() {
-    let params = WhiteboxParams {
-        payload_mass: 0.3,
-        length: 0.8,
-        friction: 0.01,
+    let params = PendulumModel {
+        m_p: 0.3,
+        l: 0.8,
+        c: 0.01,
         ..Default::default()
     };
     let dt = 0.03;
     let (ad, bd) = params.discrete(dt);
     let model = whitebox::model(&params, 1, dt, None).unwrap();
-    let mut s = nalgebra::Vector3::new(0.2, -0.1, 0.05);
-    let mut rng = Rng(2);
+    // s = [v, θ, θ̇]
+    let mut s = DVector::from_column_slice(&[0.2, 0.05, -0.1]);
+    let mut rng = Rng::new(2);
     let us: Vec<f64> = (0..300).map(|_| rng.next()).collect();
     let mut y = Vec::new();
     for u in &us {
-        y.push((s[0], s[2]));
-        s = ad * s + bd * *u;
+        y.push((s[0], s[1]));
+        s = &ad * &s + &bd * *u;
     }
     // History: y_0 (oldest), y_1; predict y_2 … from inputs u_1 …
     let hist = [y[0].0, y[0].1, y[1].0, y[1].1];
@@ -394,20 +396,17 @@ fn whitebox_delay_form_is_exact_for_the_three_state_model() {
     // sit on the imaginary axis; the discrete model's spectral radius is ≤ 1.
     assert!(model.spectral_radius().unwrap() <= 1.0 + 1e-9);
     // Swing frequency of the continuous model equals eq. 4.8 (frictionless).
-    let p0 = WhiteboxParams {
-        friction: 0.0,
-        ..params.clone()
-    };
+    let p0 = PendulumModel { c: 0.0, ..params };
     let (a, _) = p0.continuous();
-    let w2 = -a[(1, 2)];
-    let expect = 9.81 / 0.8 * (0.952 + 0.3) / 0.952;
+    let w2 = -a[(2, 1)];
+    let expect = GRAVITY / 0.8 * (0.952 + 0.3) / 0.952;
     assert!((w2 - expect).abs() < 1e-12);
 }
 
 #[test]
 fn whitebox_two_axes_are_decoupled_copies() {
-    let m1 = whitebox::model(&WhiteboxParams::default(), 1, 0.03, None).unwrap();
-    let m2 = whitebox::model(&WhiteboxParams::default(), 2, 0.03, None).unwrap();
+    let m1 = whitebox::model(&PendulumModel::default(), 1, 0.03, None).unwrap();
+    let m2 = whitebox::model(&PendulumModel::default(), 2, 0.03, None).unwrap();
     assert_eq!(m2.order(), 8);
     // North v row: its own v/θ coefficients equal the one-axis model's, the East ones are 0.
     assert_eq!(m2.a[(0, 0)], m1.a[(0, 0)]);
@@ -542,7 +541,7 @@ fn search_without_stable_candidate_is_an_identification_error() {
     let len = 1200;
     let mut x = vec![0.0; len];
     let mut u = vec![0.0; len];
-    let mut rng = Rng(4);
+    let mut rng = Rng::new(4);
     x[0] = 1e-3;
     for k in 0..len - 1 {
         u[k] = rng.next();
@@ -584,7 +583,7 @@ fn smoothers_preserve_what_they_should() {
     let g = smooth::gaussian(&flat, 9).unwrap();
     assert!(g.iter().all(|v| (v - 2.5).abs() < 1e-12));
     // Noise is reduced.
-    let mut rng = Rng(8);
+    let mut rng = Rng::new(8);
     let noisy: Vec<f64> = (0..400).map(|_| rng.next()).collect();
     let sm = smooth::gaussian(&noisy, 15).unwrap();
     let var = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64;

@@ -12,10 +12,13 @@ use numpy::{
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use swing_core::control::check::{self, StepCheckSettings};
-use swing_core::control::lqr::{self, LqrController, LqrSettings, PendulumParams};
+use swing_core::control::lqr::{LqrController, LqrSettings};
 use swing_core::control::mpc::timing::tick_timing;
 use swing_core::control::mpc::{MpcController, MpcSettings};
+use swing_core::control::riccati;
 use swing_core::control::{AxisState, ControlError, SwingController, TickInfo, TickKind};
+use swing_core::plant::PendulumModel;
+use swing_core::testing::pendulum_delay_model;
 
 use crate::convert;
 use crate::errors::to_py;
@@ -206,7 +209,7 @@ impl PyLqr {
         settings: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         let s: LqrSettings = convert::settings(settings, "settings")?;
-        let p: PendulumParams = convert::from_py(params, "params")?;
+        let p: PendulumModel = convert::from_py(params, "params")?;
         Ok(Self {
             inner: LqrController::new(p, axes, s).map_err(to_py)?,
         })
@@ -280,7 +283,7 @@ type Riccati = fn(
     &DMatrix<f64>,
     &DMatrix<f64>,
     &DMatrix<f64>,
-) -> Result<lqr::RiccatiSolution, ControlError>;
+) -> Result<riccati::RiccatiSolution, ControlError>;
 
 fn riccati<'py>(
     py: Python<'py>,
@@ -309,7 +312,7 @@ fn care<'py>(
     q: PyReadonlyArray2<'py, f64>,
     r: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
-    riccati(py, lqr::care, a, b, q, r)
+    riccati(py, riccati::care, a, b, q, r)
 }
 
 /// Discrete algebraic Riccati equation: returns (K, P) with u = −Kx.
@@ -321,7 +324,7 @@ fn dare<'py>(
     q: PyReadonlyArray2<'py, f64>,
     r: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
-    riccati(py, lqr::dare, a, b, q, r)
+    riccati(py, riccati::dare, a, b, q, r)
 }
 
 /// Time `n_ticks` MPC ticks in Rust (closed loop on the model itself; constrained: only
@@ -365,8 +368,8 @@ fn pendulum_model(
     axes: usize,
     seed: u64,
 ) -> PyResult<PyLinearModel> {
-    let p = PendulumParams { m_q, m_p, l, c };
-    let m = lqr::pendulum_delay_model(&p, dt, delays, axes, seed).map_err(to_py)?;
+    let p = PendulumModel { m_q, m_p, l, c };
+    let m = pendulum_delay_model(&p, dt, delays, axes, seed).map_err(to_py)?;
     PyLinearModel::wrap(py, m)
 }
 

@@ -15,6 +15,7 @@ mod sysid;
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("GRAVITY", swing_core::plant::GRAVITY)?;
     sim::register(m)?;
     sysid::register(m)?;
     control::register(m)?;

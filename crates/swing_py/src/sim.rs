@@ -2,11 +2,12 @@
 
 use numpy::{IntoPyArray, PyArray1};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
-use swing_core::control::lqr::{LqrController, LqrSettings, PendulumParams};
+use pyo3::types::{PyDict, PyTuple};
+use swing_core::control::lqr::{LqrController, LqrSettings};
 use swing_core::control::mpc::{MpcController, MpcSettings};
 use swing_core::control::px4::AxisSetpoint;
-use swing_core::sim::{Scenario, Simulator, Trace};
+use swing_core::plant::PendulumModel;
+use swing_core::sim::{Scenario, Simulator, Trace, FLIGHT_COLUMNS, STATE_KEYS, TRACE_COLUMNS};
 use swing_core::ConfigError;
 
 use crate::errors::to_py;
@@ -246,44 +247,11 @@ impl PySimulator {
         Ok(())
     }
 
-    /// The current state as a dict (true plant state, measured swing, cascade setpoints).
+    /// The current state as a dict keyed by `STATE_KEYS` (true plant state, measured
+    /// swing, cascade setpoints).
     fn state<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let s = self.inner.state();
         let d = PyDict::new(py);
-        let (roll, pitch, yaw) = nalgebra::UnitQuaternion::from_quaternion(s.att).euler_angles();
-        let swing = self.inner.measured_swing();
-        let truth = self.inner.true_swing();
-        let fc = self.inner.cascade();
-        let items: [(&str, f64); 27] = [
-            ("t", self.inner.time()),
-            ("pn", s.pos.x),
-            ("pe", s.pos.y),
-            ("pd", s.pos.z),
-            ("vn", s.vel.x),
-            ("ve", s.vel.y),
-            ("vd", s.vel.z),
-            ("roll", roll),
-            ("pitch", pitch),
-            ("yaw", yaw),
-            ("q0", s.att.w),
-            ("q1", s.att.i),
-            ("q2", s.att.j),
-            ("q3", s.att.k),
-            ("p", s.rate.x),
-            ("q", s.rate.y),
-            ("r", s.rate.z),
-            ("swing_n", swing[0]),
-            ("swing_e", swing[1]),
-            ("swing_rate_n", truth[2]),
-            ("swing_rate_e", truth[3]),
-            ("acc_sp_n", fc.acc_sp.x),
-            ("acc_sp_e", fc.acc_sp.y),
-            ("acc_sp_d", fc.acc_sp.z),
-            ("swing_true_n", truth[0]),
-            ("swing_true_e", truth[1]),
-            ("thrust", s.thrust.sum()),
-        ];
-        for (k, v) in items {
+        for (k, v) in self.inner.state_snapshot() {
             d.set_item(k, v)?;
         }
         Ok(d)
@@ -333,7 +301,7 @@ impl PySimulator {
         budget: f64,
     ) -> PyResult<()> {
         let settings: LqrSettings = crate::convert::settings(settings, "lqr")?;
-        let params: PendulumParams = crate::convert::from_py(params, "lqr_params")?;
+        let params: PendulumModel = crate::convert::from_py(params, "lqr_params")?;
         let lqr = LqrController::new(params, axes, settings).map_err(to_py)?;
         self.inner
             .attach_controller(Box::new(lqr), engage_at, budget)
@@ -359,5 +327,8 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyScenario>()?;
     m.add_function(wrap_pyfunction!(sim_real_time_factor, m)?)?;
     m.add_class::<PySimulator>()?;
+    m.add("TRACE_COLUMNS", PyTuple::new(m.py(), TRACE_COLUMNS)?)?;
+    m.add("STATE_KEYS", PyTuple::new(m.py(), STATE_KEYS)?)?;
+    m.add("FLIGHT_COLUMNS", PyTuple::new(m.py(), FLIGHT_COLUMNS)?)?;
     Ok(())
 }

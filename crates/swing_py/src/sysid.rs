@@ -12,6 +12,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use swing_core::control::mpc::MpcSettings;
 use swing_core::control::selection::{self, SelectionSettings};
+use swing_core::plant::GRAVITY;
 use swing_core::sysid::metrics::rollout_nmae;
 use swing_core::sysid::pipeline::{self, candidate_row, ThrustLog};
 use swing_core::sysid::search::SearchResult;
@@ -504,13 +505,14 @@ fn sysid_fft_peak(signal: &Bound<'_, PyAny>, dt: f64, f_min: f64, f_max: f64) ->
 
 /// Cable length [m] from the swing frequency [Hz] (eq. 4.8).
 #[pyfunction]
+#[pyo3(signature = (freq_hz, vehicle_mass, payload_mass, gravity=GRAVITY))]
 fn sysid_cable_length(freq_hz: f64, vehicle_mass: f64, payload_mass: f64, gravity: f64) -> f64 {
     whitebox::cable_length(freq_hz, vehicle_mass, payload_mass, gravity)
 }
 
 /// RLS total-mass estimates after each sample from vertical thrust and down acceleration.
 #[pyfunction]
-#[pyo3(signature = (thrust_vertical, acc_down, *, gravity, forgetting=1.0, initial=1.0))]
+#[pyo3(signature = (thrust_vertical, acc_down, *, gravity=GRAVITY, forgetting=1.0, initial=1.0))]
 fn sysid_rls_mass<'py>(
     py: Python<'py>,
     thrust_vertical: &Bound<'py, PyAny>,
@@ -554,6 +556,7 @@ fn sysid_smooth_gaussian<'py>(
 
 /// Register this domain's functions and classes on the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("GRAVITY", GRAVITY)?;
     m.add_class::<PyLinearModel>()?;
     m.add_class::<PySearch>()?;
     m.add_function(wrap_pyfunction!(check_settings, m)?)?;

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from swingrt import _core
 from swingrt.errors import DataError, MissingColumnError
 from swingrt.io.atomic import atomic_path
 
@@ -36,29 +37,9 @@ __all__ = [
     "write_columns",
 ]
 
-#: Column names of a swingrt trace, in their canonical order (units: SI, angles in rad).
-TRACE_COLUMNS = (
-    "t",
-    "pn",
-    "pe",
-    "pd",
-    "vn",
-    "ve",
-    "vd",
-    "roll",
-    "pitch",
-    "yaw",
-    "swing_n",
-    "swing_e",
-    "swing_rate_n",
-    "swing_rate_e",
-    "acc_sp_n",
-    "acc_sp_e",
-    "acc_sp_d",
-    "vel_sp_n",
-    "vel_sp_e",
-    "vel_sp_d",
-)
+#: Columns every flight log has, in their canonical order (units: SI, angles in rad): the
+#: core's schema (``_core.FLIGHT_COLUMNS``; the simulator logs ``_core.TRACE_COLUMNS``).
+TRACE_COLUMNS: tuple[str, ...] = _core.FLIGHT_COLUMNS
 
 _SUFFIXES = (".parquet", ".csv", ".ulg")
 

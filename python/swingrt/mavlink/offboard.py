@@ -42,7 +42,7 @@ import numpy as np
 
 from swingrt._core import Mpc
 from swingrt.errors import ConfigError, ControlError, FlightAbort, LinkError, ModelError
-from swingrt.io.flight import write_columns
+from swingrt.io.flight import TRACE_COLUMNS, write_columns
 from swingrt.mavlink.link import (
     PX4_MAIN_MODE,
     PX4_SUB_MODE_AUTO,
@@ -288,11 +288,7 @@ class FlightReport:
 # ----------------------------------------------------------------------------- session
 
 #: Columns the node logs: the trace columns (:data:`swingrt.io.TRACE_COLUMNS`) + loop timing.
-NODE_COLUMNS = (
-    "t", "pn", "pe", "pd", "vn", "ve", "vd", "roll", "pitch", "yaw", "swing_n", "swing_e",
-    "swing_rate_n", "swing_rate_e", "acc_sp_n", "acc_sp_e", "acc_sp_d", "vel_sp_n",
-    "vel_sp_e", "vel_sp_d", "jitter_s", "compute_s",
-)  # fmt: skip
+NODE_COLUMNS = (*TRACE_COLUMNS, "jitter_s", "compute_s")
 
 
 class OffboardSession:
@@ -547,12 +543,19 @@ class OffboardSession:
     def _log(self, cols, k, jitter, compute, rate, acc, ref) -> None:
         tel = self.tel
         roll, pitch, yaw = tel.euler()
-        row = (
-            k * self.ts, *tel.pos, *tel.vel, roll, pitch, yaw, *tel.swing, *rate,
-            acc[0], acc[1], tel.acc_sp[2], ref[0], ref[1], 0.0, jitter, compute,
-        )  # fmt: skip
-        for c, v in zip(NODE_COLUMNS, row, strict=True):
-            cols[c][k] = v
+        row = {
+            "t": k * self.ts,
+            "pn": tel.pos[0], "pe": tel.pos[1], "pd": tel.pos[2],
+            "vn": tel.vel[0], "ve": tel.vel[1], "vd": tel.vel[2],
+            "roll": roll, "pitch": pitch, "yaw": yaw,
+            "swing_n": tel.swing[0], "swing_e": tel.swing[1],
+            "swing_rate_n": rate[0], "swing_rate_e": rate[1],
+            "acc_sp_n": acc[0], "acc_sp_e": acc[1], "acc_sp_d": tel.acc_sp[2],
+            "vel_sp_n": ref[0], "vel_sp_e": ref[1], "vel_sp_d": 0.0,
+            "jitter_s": jitter, "compute_s": compute,
+        }  # fmt: skip
+        for c in NODE_COLUMNS:
+            cols[c][k] = row[c]
 
 
 # ----------------------------------------------------------------------------- controllers

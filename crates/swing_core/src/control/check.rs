@@ -10,10 +10,10 @@
 //! velocity integrator and one pendulum), optionally behind a first-order input lag: hold,
 //! velocity step, hold. A model whose MPC cannot hold and track that plant is not one to fly.
 
-use nalgebra::DVector;
-
 use crate::config::{finite, non_negative, positive, ConfigError};
-use crate::control::{AxisState, ControlError, MpcController, MpcSettings, SwingController};
+use crate::control::{
+    AxisState, ControlError, LinearPlant, MpcController, MpcSettings, SwingController,
+};
 use crate::sysid::LinearModel;
 
 /// Scenario of a closed-loop step check.
@@ -80,17 +80,8 @@ impl StepCheck {
     }
 }
 
-/// Where one axis' velocity, swing and (optional) swing rate sit in the plant's newest frame.
-struct PlantAxis {
-    v: usize,
-    swing: usize,
-    swing_rate: Option<usize>,
-}
-
-fn plant_axes(
-    controller: &LinearModel,
-    plant: &LinearModel,
-) -> Result<Vec<PlantAxis>, ControlError> {
+/// Check that `plant` can stand in for the controller's model: same inputs and sample time.
+fn check_plant(controller: &LinearModel, plant: &LinearModel) -> Result<(), ControlError> {
     if controller.inputs != plant.inputs {
         return Err(ControlError::Model(format!(
             "plant inputs {:?} differ from the controller model's {:?}",
@@ -103,38 +94,7 @@ fn plant_axes(
             plant.dt, controller.dt
         )));
     }
-    let n = plant.states.len();
-    if n == 0 || plant.delays == 0 || plant.a.nrows() != n * plant.delays {
-        return Err(ControlError::Model(format!(
-            "plant model: {} states × {} delays does not match A ({}×{})",
-            n,
-            plant.delays,
-            plant.a.nrows(),
-            plant.a.ncols()
-        )));
-    }
-    let find = |name: String| plant.states.iter().position(|s| *s == name);
-    plant
-        .inputs
-        .iter()
-        .enumerate()
-        .map(|(a, input)| {
-            let s = match input.strip_prefix("acc_sp_") {
-                Some(s) if !s.is_empty() => s.to_string(),
-                _ => ["n", "e"].get(a).copied().unwrap_or("n").to_string(),
-            };
-            match (find(format!("v{s}")), find(format!("swing_{s}"))) {
-                (Some(v), Some(swing)) => Ok(PlantAxis {
-                    v,
-                    swing,
-                    swing_rate: find(format!("swing_rate_{s}")),
-                }),
-                _ => Err(ControlError::Model(format!(
-                    "plant model lacks v{s} or swing_{s} for input '{input}'"
-                ))),
-            }
-        })
-        .collect()
+    Ok(())
 }
 
 /// Fly the MPC designed on `controller` (with `settings`) on the linear `plant`, started at
@@ -159,8 +119,9 @@ pub fn step_check_with(
     check: &StepCheckSettings,
 ) -> Result<StepCheck, ControlError> {
     check.validate()?;
-    let axes = plant_axes(controller, plant)?;
-    let m = axes.len();
+    check_plant(controller, plant)?;
+    let mut lin = LinearPlant::new(plant)?;
+    let m = lin.axes();
     let dt = plant.dt;
     let ticks = (check.duration / dt).round() as usize;
     let step_tick = (check.t_step / dt).round() as usize;
@@ -169,13 +130,7 @@ pub fn step_check_with(
     } else {
         0.0
     };
-    // z⁺ = A z + B (u − ū) + c, written as A z + B u + c̃.
-    let mean = DVector::from_column_slice(&plant.input_mean);
-    let c = &plant.c - &plant.b * &mean;
-    let mut z = DVector::<f64>::zeros(plant.a.nrows());
-    let mut next = z.clone();
-    let mut applied = DVector::<f64>::zeros(m);
-    let mut prev_swing = vec![0.0; m];
+    let mut applied = vec![0.0; m];
     let mut state = vec![AxisState::default(); m];
     let mut vel_ref = vec![0.0; m];
     let mut out = vec![0.0; m];
@@ -187,19 +142,9 @@ pub fn step_check_with(
         hold_drift: 0.0,
     };
     for k in 0..ticks {
-        for (a, ax) in axes.iter().enumerate() {
-            let swing = z[ax.swing];
-            let rate = match ax.swing_rate {
-                Some(i) => z[i],
-                None => (swing - prev_swing[a]) / dt,
-            };
-            prev_swing[a] = swing;
-            state[a] = AxisState {
-                v: z[ax.v],
-                swing,
-                swing_rate: rate,
-            };
-            let v = z[ax.v];
+        lin.measure(&mut state);
+        for a in 0..m {
+            let v = state[a].v;
             if !v.is_finite() || v.abs() > 1e3 * step {
                 result.final_error = f64::INFINITY;
                 result.overshoot = f64::INFINITY;
@@ -217,13 +162,11 @@ pub fn step_check_with(
         for a in 0..m {
             applied[a] = lag * applied[a] + (1.0 - lag) * out[a];
         }
-        next.copy_from(&c);
-        next.gemv(1.0, &plant.a, &z, 1.0);
-        next.gemv(1.0, &plant.b, &applied, 1.0);
-        std::mem::swap(&mut z, &mut next);
+        lin.step(&applied);
     }
-    for ax in &axes {
-        let e = (z[ax.v] - check.step).abs() / step;
+    lin.measure(&mut state);
+    for s in &state {
+        let e = (s.v - check.step).abs() / step;
         result.final_error = result
             .final_error
             .max(if e.is_finite() { e } else { f64::INFINITY });

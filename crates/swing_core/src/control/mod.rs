@@ -11,13 +11,19 @@ use thiserror::Error;
 use crate::error::{Categorized, Category};
 
 pub mod check;
+pub mod layout;
 pub mod lqr;
 pub mod mpc;
+pub mod plant;
+pub mod riccati;
 pub mod selection;
 
 pub use check::{mpc_step_check, step_check_with, StepCheck, StepCheckSettings};
-pub use lqr::{care, dare, LqrController, LqrSettings, PendulumParams, RiccatiSolution};
+pub use layout::{AxisColumns, AxisLayout, Measured};
+pub use lqr::{LqrController, LqrSettings};
 pub use mpc::{MpcController, MpcSettings, QpSolverKind};
+pub use plant::LinearPlant;
+pub use riccati::{care, dare, RiccatiSolution};
 
 /// Measured state of one controlled horizontal axis (North or East).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

@@ -62,9 +62,11 @@ pub struct Px4Params {
     pub thrust_max: f64,
     /// Horizontal thrust margin kept when vertical thrust saturates (MPC_THR_XY_MARG) [normalised].
     pub thrust_xy_margin: f64,
-    /// Hover thrust (MPC_THR_HOVER) [normalised]; 0 = as PX4's hover-thrust estimator would
-    /// converge to for the simulated vehicle and payload.
-    pub hover_thrust: f64,
+    /// Hover thrust (MPC_THR_HOVER) [normalised]; `None` = as PX4's hover-thrust estimator
+    /// would converge to for the simulated vehicle and payload. In files, absent or 0 means
+    /// `None` (and `None` is written as 0).
+    #[serde(deserialize_with = "zero_is_none", serialize_with = "none_is_zero")]
+    pub hover_thrust: Option<f64>,
     /// Rate-loop frequency [Hz] (must divide the physics rate).
     pub rate_loop_hz: f64,
     /// Attitude-loop frequency [Hz].
@@ -96,12 +98,22 @@ impl Default for Px4Params {
             thrust_min: 0.12,
             thrust_max: 1.0,
             thrust_xy_margin: 0.3,
-            hover_thrust: 0.0,
+            hover_thrust: None,
             rate_loop_hz: 500.0,
             att_loop_hz: 250.0,
             pos_loop_hz: 50.0,
         }
     }
+}
+
+/// Read an optional number where 0 (the file format's "estimate") also means `None`.
+fn zero_is_none<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<f64>, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.filter(|x| *x != 0.0))
+}
+
+/// Write `None` as 0, the file format's "estimate".
+fn none_is_zero<S: serde::Serializer>(v: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_f64(v.unwrap_or(0.0))
 }
 
 impl Px4Params {
@@ -135,7 +147,9 @@ impl Px4Params {
         in_range("thrust_min", self.thrust_min, 0.0, 0.9)?;
         in_range("thrust_max", self.thrust_max, self.thrust_min + 0.05, 1.0)?;
         in_range("thrust_xy_margin", self.thrust_xy_margin, 0.0, 1.0)?;
-        in_range("hover_thrust", self.hover_thrust, 0.0, 0.95)?;
+        if let Some(h) = self.hover_thrust {
+            in_range("hover_thrust", h, 0.0, 0.95)?;
+        }
         positive("rate_loop_hz", self.rate_loop_hz)?;
         positive("att_loop_hz", self.att_loop_hz)?;
         positive("pos_loop_hz", self.pos_loop_hz)?;

@@ -1,9 +1,11 @@
 //! The physical plant: vehicle, suspended payload and air (thesis chapter 3).
 
 pub mod dynamics;
+pub mod linear;
 pub mod params;
 pub mod wind;
 
 pub use dynamics::{Effects, Model, PlantState, StepInput};
+pub use linear::PendulumModel;
 pub use params::{PayloadKind, PayloadParams, VehicleParams, GRAVITY};
 pub use wind::{Wind, WindParams};

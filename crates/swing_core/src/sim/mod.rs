@@ -2,11 +2,13 @@
 
 pub mod runner;
 pub mod scenario;
+mod supervisor;
+mod ticker;
 pub mod trace;
 
 pub use runner::{SimError, Simulator};
-pub use scenario::{NoiseParams, RandomSteps, Scenario, SetpointEntry};
-pub use trace::Trace;
+pub use scenario::{Axes, NoiseParams, RandomSteps, Scenario, SetpointEntry};
+pub use trace::{StateExtras, Trace, TraceRow, FLIGHT_COLUMNS, STATE_KEYS, TRACE_COLUMNS};
 
 /// Simulated seconds per wall second of the full loop of `scenario` over `seconds` of
 /// simulated flight on the calling thread.

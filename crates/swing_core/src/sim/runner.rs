@@ -5,8 +5,6 @@
 //! All loop periods are integer multiples of the physics step, so a run is a pure function
 //! of the scenario (and its seed).
 
-use std::time::Instant;
-
 use nalgebra::{UnitQuaternion, Vector3, Vector4};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -14,10 +12,12 @@ use rand_distr::{Distribution, StandardNormal};
 use thiserror::Error;
 
 use super::scenario::{Scenario, SetpointEntry};
-use super::trace::{Trace, BASE_COLUMNS, DOUBLE_COLUMNS};
+use super::supervisor::{ControllerSupervisor, TickInputs};
+use super::ticker::Ticker;
+use super::trace::{StateExtras, Trace, TraceRow, DOUBLE_COLUMNS, STATE_KEYS, TRACE_COLUMNS};
 use crate::config::ConfigError;
 use crate::control::px4::{AxisSetpoint, Px4Cascade, Setpoint};
-use crate::control::{AxisState, SwingController};
+use crate::control::SwingController;
 use crate::error::{Categorized, Category};
 use crate::plant::dynamics::swing_angles;
 use crate::plant::{Effects, Model, PayloadKind, PlantState, StepInput, Wind};
@@ -63,42 +63,6 @@ pub struct TickStats {
     pub constrained: usize,
 }
 
-/// Countdown for a loop that runs every `div` physics steps (cheaper than `k % div`, which
-/// would be six integer divisions on the hot path of every step).
-#[derive(Clone, Copy, Debug)]
-struct Ticker {
-    div: u64,
-    left: u64,
-}
-
-impl Ticker {
-    fn new(div: u64) -> Self {
-        Self { div, left: 0 }
-    }
-
-    /// True on steps 0, div, 2·div, …; call exactly once per physics step.
-    #[inline]
-    fn due(&mut self) -> bool {
-        if self.left == 0 {
-            self.left = self.div - 1;
-            true
-        } else {
-            self.left -= 1;
-            false
-        }
-    }
-}
-
-struct Attached {
-    ctrl: Box<dyn SwingController>,
-    ticker: Ticker,
-    budget: f64,
-    engage_at: f64,
-    started: bool,
-    acc: [f64; 2],
-    vel_ref: [f64; 2],
-}
-
 /// A steppable closed-loop simulation of vehicle, payload, PX4 cascade and wind.
 pub struct Simulator {
     sc: Scenario,
@@ -112,9 +76,6 @@ pub struct Simulator {
     h: f64,
     step: u64,
     end_step: u64,
-    div_rate: u64,
-    div_pos: u64,
-    div_log: u64,
     tick_rate: Ticker,
     tick_att: Ticker,
     tick_pos: Ticker,
@@ -128,11 +89,7 @@ pub struct Simulator {
     meas_pos: Vector3<f64>,
     meas_vel: Vector3<f64>,
     acc_bias: Vector3<f64>,
-    attached: Option<Attached>,
-    ctrl_active: bool,
-    fallback: bool,
-    fallback_reason: Option<String>,
-    stats: TickStats,
+    supervisor: ControllerSupervisor,
     trace: Trace,
     row: Vec<f64>,
 }
@@ -156,11 +113,7 @@ impl Simulator {
             )
             .into());
         }
-        let believed = if sc.controller.hover_thrust > 0.0 {
-            sc.controller.hover_thrust
-        } else {
-            hover_total
-        };
+        let believed = sc.controller.hover_thrust.unwrap_or(hover_total);
         let mut fc = Px4Cascade::new(sc.controller.clone(), believed);
         fc.trim_collective(hover_total);
         let start = Vector3::from(sc.start);
@@ -172,7 +125,7 @@ impl Simulator {
             p.initial_swing_e,
         );
         state.project(model.links());
-        let mut names: Vec<&str> = BASE_COLUMNS.to_vec();
+        let mut names: Vec<&str> = TRACE_COLUMNS.to_vec();
         if sc.payload.kind == PayloadKind::Double {
             names.extend(DOUBLE_COLUMNS);
         }
@@ -191,9 +144,6 @@ impl Simulator {
             h,
             step: 0,
             end_step: (sc.duration / h).round() as u64,
-            div_rate: div(sc.controller.rate_loop_hz),
-            div_pos: div(sc.controller.pos_loop_hz),
-            div_log: div(sc.log_rate),
             tick_rate: Ticker::new(div(sc.controller.rate_loop_hz)),
             tick_att: Ticker::new(div(sc.controller.att_loop_hz)),
             tick_pos: Ticker::new(div(sc.controller.pos_loop_hz)),
@@ -206,11 +156,7 @@ impl Simulator {
             meas_pos: start,
             meas_vel: Vector3::zeros(),
             acc_bias,
-            attached: None,
-            ctrl_active: false,
-            fallback: false,
-            fallback_reason: None,
-            stats: TickStats::default(),
+            supervisor: ControllerSupervisor::default(),
             trace: Trace::new(&names, rows),
             row: vec![0.0; names.len()],
             fc,
@@ -230,43 +176,14 @@ impl Simulator {
         engage_at: f64,
         budget: f64,
     ) -> Result<(), SimError> {
-        let period = ctrl.period();
-        let steps = period / self.h;
-        if !(steps >= 1.0 - 1e-9 && (steps - steps.round()).abs() < 1e-6) {
-            return Err(ConfigError::new(
-                "controller.period",
-                format!(
-                    "{period} s is not a multiple of the physics step {} s",
-                    self.h
-                ),
-            )
-            .into());
-        }
-        if !(1..=2).contains(&ctrl.axes()) {
-            return Err(ConfigError::new("controller.axes", "must be 1 (N) or 2 (N+E)").into());
-        }
-        crate::config::non_negative("controller.engage_at", engage_at)?;
-        crate::config::positive("controller.budget", budget)?;
-        self.attached = Some(Attached {
-            ctrl,
-            // Aligned with the physics step count so far, like `k % div`.
-            ticker: Ticker {
-                div: steps.round() as u64,
-                left: (steps.round() as u64 - self.step % steps.round() as u64)
-                    % steps.round() as u64,
-            },
-            budget,
-            engage_at,
-            started: false,
-            acc: [0.0; 2],
-            vel_ref: [0.0; 2],
-        });
+        self.supervisor
+            .attach(ctrl, engage_at, budget, self.h, self.step)?;
         Ok(())
     }
 
     /// Predicted outputs of the attached controller's last tick, if it predicts.
     pub fn controller_prediction(&mut self) -> Option<Vec<f64>> {
-        self.attached.as_mut().and_then(|a| a.ctrl.prediction())
+        self.supervisor.prediction()
     }
 
     /// Switch idealised effects (drag, friction, rotors) for experiments.
@@ -325,12 +242,12 @@ impl Simulator {
 
     /// Controller tick timings so far.
     pub fn tick_stats(&self) -> &TickStats {
-        &self.stats
+        self.supervisor.stats()
     }
 
     /// Why the controller was handed back to PX4, if it was.
     pub fn fallback_reason(&self) -> Option<&str> {
-        self.fallback_reason.as_deref()
+        self.supervisor.fallback_reason()
     }
 
     /// The latest measured (noisy) swing angles (N, E) [rad].
@@ -364,7 +281,7 @@ impl Simulator {
         while self.step < self.end_step {
             self.physics_step()?;
         }
-        if self.step % self.div_log == 0 {
+        if self.step % self.tick_log.div() == 0 {
             self.log_row();
         }
         Ok(())
@@ -387,12 +304,8 @@ impl Simulator {
         while self.next_entry < self.schedule.len() && self.schedule[self.next_entry].t <= t {
             let e = self.schedule[self.next_entry].clone();
             for i in 0..3 {
-                if let Some((mode, v)) = e.axis(i) {
-                    self.sp.axes[i] = match mode {
-                        'p' => AxisSetpoint::Position(v),
-                        'v' => AxisSetpoint::Velocity(v),
-                        _ => AxisSetpoint::Acceleration(v),
-                    };
+                if let Some(sp) = e.axis(i) {
+                    self.sp.axes[i] = sp;
                 }
             }
             if let Some(y) = e.yaw {
@@ -417,23 +330,13 @@ impl Simulator {
         if pos_due {
             self.measure_translation();
         }
-        let ctrl_due = match self.attached.as_mut() {
-            Some(a) => a.ticker.due(),
-            None => false,
-        };
-        if ctrl_due && !self.fallback {
+        if self.supervisor.due() {
             self.controller_tick();
         }
         if pos_due {
             let mut sp = self.sp;
-            if self.ctrl_active {
-                if let Some(a) = &self.attached {
-                    for i in 0..a.ctrl.axes() {
-                        sp.axes[i] = AxisSetpoint::Acceleration(a.acc[i]);
-                    }
-                }
-            }
-            let dt = self.div_pos as f64 * self.h;
+            self.supervisor.override_setpoint(&mut sp);
+            let dt = self.tick_pos.div() as f64 * self.h;
             self.fc
                 .position_velocity(&sp, &self.meas_pos, &self.meas_vel, dt, &self.acc_bias);
         }
@@ -441,7 +344,7 @@ impl Simulator {
             self.fc.attitude(&self.state.att);
         }
         if self.tick_rate.due() {
-            let dt = self.div_rate as f64 * self.h;
+            let dt = self.tick_rate.div() as f64 * self.h;
             self.fc.rates(&self.state.rate, dt);
             self.motor_sp = self.fc.motor_thrust_setpoints(&self.sc.vehicle);
         }
@@ -477,83 +380,16 @@ impl Simulator {
     }
 
     fn controller_tick(&mut self) {
-        let t = self.time();
-        let swing = self.measured_swing();
         let truth = self.true_swing();
-        let pos_p = self.sc.controller.pos_p;
-        let vel_max = self.sc.controller.vel_max_xy;
-        let Some(a) = self.attached.as_mut() else {
-            return;
+        let inputs = TickInputs {
+            t: self.time(),
+            swing: self.measured_swing(),
+            swing_rate: [truth[2], truth[3]],
+            pos: &self.meas_pos,
+            vel: &self.meas_vel,
+            px4: &self.sc.controller,
         };
-        if t + 1e-9 < a.engage_at {
-            return;
-        }
-        let axes = a.ctrl.axes();
-        let mut states = [AxisState::default(); 2];
-        let mut vel_ref = [0.0; 2];
-        for i in 0..axes {
-            states[i] = AxisState {
-                v: self.meas_vel[i],
-                swing: swing[i],
-                swing_rate: truth[2 + i],
-            };
-            vel_ref[i] = match self.sp.axes[i] {
-                AxisSetpoint::Velocity(v) => v,
-                AxisSetpoint::Position(x) => {
-                    ((x - self.meas_pos[i]) * pos_p[i]).clamp(-vel_max, vel_max)
-                }
-                AxisSetpoint::Acceleration(_) => 0.0,
-            };
-        }
-        if !a.started {
-            let acc = [self.fc.acc_sp.x, self.fc.acc_sp.y];
-            a.ctrl.reset(&states[..axes], &acc[..axes]);
-            a.acc = acc;
-            a.started = true;
-        }
-        let mut out = [0.0; 2];
-        let t0 = Instant::now();
-        let res = a
-            .ctrl
-            .step(&states[..axes], &vel_ref[..axes], &mut out[..axes]);
-        let elapsed = t0.elapsed().as_secs_f64();
-        self.stats.tick_us.push(elapsed * 1e6);
-        let reason = match &res {
-            Err(e) => Some(format!("controller error: {e}")),
-            Ok(_) if elapsed > a.budget => Some(format!(
-                "tick took {:.3} ms, over its {:.3} ms budget",
-                elapsed * 1e3,
-                a.budget * 1e3
-            )),
-            Ok(_) if out[..axes].iter().any(|x| !x.is_finite()) => {
-                Some("controller output is not finite".to_string())
-            }
-            Ok(_) => None,
-        };
-        if let Ok(info) = res {
-            if info.kind == crate::control::TickKind::Constrained {
-                self.stats.constrained += 1;
-            }
-        }
-        a.vel_ref = vel_ref;
-        match reason {
-            None => {
-                a.acc = out;
-                self.ctrl_active = true;
-            }
-            Some(r) => {
-                // Bumpless hand-back: PX4's velocity integrator takes the last command.
-                for i in 0..axes {
-                    let err = vel_ref[i] - self.meas_vel[i];
-                    let v = a.acc[i] - err * self.sc.controller.vel_p[i];
-                    self.fc.set_velocity_integrator(i, v);
-                    self.sp.axes[i] = AxisSetpoint::Velocity(vel_ref[i]);
-                }
-                self.ctrl_active = false;
-                self.fallback = true;
-                self.fallback_reason = Some(format!("t = {t:.2} s: {r}"));
-            }
-        }
+        self.supervisor.tick(&inputs, &mut self.sp, &mut self.fc);
     }
 
     fn check_finite(&self) -> Result<(), SimError> {
@@ -572,7 +408,8 @@ impl Simulator {
         }
     }
 
-    fn log_row(&mut self) {
+    /// The current sample of every trace column (what the next logged row would hold).
+    pub fn sample(&self) -> TraceRow {
         let s = &self.state;
         let (roll, pitch, yaw) = UnitQuaternion::from_quaternion(s.att).euler_angles();
         let truth = self.true_swing();
@@ -583,52 +420,76 @@ impl Simulator {
             s.pos
         };
         let mut vel_sp = self.fc.vel_sp;
-        if let Some(a) = &self.attached {
-            if self.ctrl_active {
-                for i in 0..a.ctrl.axes() {
-                    vel_sp[i] = a.vel_ref[i];
-                }
-            }
-        }
-        let r = &mut self.row;
-        let vals = [
-            self.step as f64 * self.h,
-            s.pos.x,
-            s.pos.y,
-            s.pos.z,
-            s.vel.x,
-            s.vel.y,
-            s.vel.z,
+        self.supervisor.override_velocity(&mut vel_sp);
+        TraceRow {
+            t: self.step as f64 * self.h,
+            pn: s.pos.x,
+            pe: s.pos.y,
+            pd: s.pos.z,
+            vn: s.vel.x,
+            ve: s.vel.y,
+            vd: s.vel.z,
             roll,
             pitch,
             yaw,
-            meas[0],
-            meas[1],
-            truth[2],
-            truth[3],
-            self.fc.acc_sp.x,
-            self.fc.acc_sp.y,
-            self.fc.acc_sp.z,
-            vel_sp.x,
-            vel_sp.y,
-            vel_sp.z,
-            s.thrust.sum(),
-            self.wind_now.x,
-            self.wind_now.y,
-            self.wind_now.z,
-            truth[0],
-            truth[1],
-            payload.x,
-            payload.y,
-            payload.z,
-            self.ctrl_active as u8 as f64,
-            self.fallback as u8 as f64,
-        ];
-        r[..vals.len()].copy_from_slice(&vals);
+            swing_n: meas[0],
+            swing_e: meas[1],
+            swing_rate_n: truth[2],
+            swing_rate_e: truth[3],
+            acc_sp_n: self.fc.acc_sp.x,
+            acc_sp_e: self.fc.acc_sp.y,
+            acc_sp_d: self.fc.acc_sp.z,
+            vel_sp_n: vel_sp.x,
+            vel_sp_e: vel_sp.y,
+            vel_sp_d: vel_sp.z,
+            thrust: s.thrust.sum(),
+            wind_n: self.wind_now.x,
+            wind_e: self.wind_now.y,
+            wind_d: self.wind_now.z,
+            swing_true_n: truth[0],
+            swing_true_e: truth[1],
+            payload_pn: payload.x,
+            payload_pe: payload.y,
+            payload_pd: payload.z,
+            ctrl_active: self.supervisor.active() as u8 as f64,
+            fallback: self.supervisor.fell_back() as u8 as f64,
+        }
+    }
+
+    /// The current state as ([`STATE_KEYS`] name, value) pairs: trace columns of
+    /// [`Self::sample`] plus the attitude quaternion and body rates ([`StateExtras`]).
+    pub fn state_snapshot(&self) -> Vec<(&'static str, f64)> {
+        let row = self.sample();
+        let s = &self.state;
+        let extras = StateExtras {
+            q0: s.att.w,
+            q1: s.att.i,
+            q2: s.att.j,
+            q3: s.att.k,
+            p: s.rate.x,
+            q: s.rate.y,
+            r: s.rate.z,
+        };
+        STATE_KEYS
+            .iter()
+            .map(|k| {
+                let v = row.get(k).or_else(|| extras.get(k));
+                (
+                    *k,
+                    v.expect("every state key is a trace column or a state extra"),
+                )
+            })
+            .collect()
+    }
+
+    fn log_row(&mut self) {
+        let vals = self.sample().values();
+        self.row[..vals.len()].copy_from_slice(&vals);
         if self.model.links() == 2 {
+            let s = &self.state;
             let [s2n, s2e, _, _] = swing_angles(&s.n[1], &s.ndot[1]);
-            r[vals.len()] = s2n;
-            r[vals.len() + 1] = s2e;
+            self.row[vals.len()] = s2n;
+            self.row[vals.len() + 1] = s2e;
         }
         self.trace.push(&self.row);
     }

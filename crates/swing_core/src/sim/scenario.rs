@@ -9,7 +9,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::config::{finite, in_range, non_negative, positive, ConfigError};
-use crate::control::px4::Px4Params;
+use crate::control::px4::{AxisSetpoint, Px4Params};
 use crate::plant::{PayloadParams, VehicleParams, WindParams};
 
 /// Sensor noise and bias (seeded by the scenario seed).
@@ -84,16 +84,16 @@ pub struct SetpointEntry {
 }
 
 impl SetpointEntry {
-    /// Per axis (N, E, D): the (mode, value) this entry sets, if any.
-    pub fn axis(&self, i: usize) -> Option<(char, f64)> {
+    /// Per axis (N, E, D): the setpoint this entry sets, if any.
+    pub fn axis(&self, i: usize) -> Option<AxisSetpoint> {
         let (p, v, a) = match i {
             0 => (self.pn, self.vn, self.an),
             1 => (self.pe, self.ve, self.ae),
             _ => (self.pd, self.vd, self.ad),
         };
-        p.map(|x| ('p', x))
-            .or(v.map(|x| ('v', x)))
-            .or(a.map(|x| ('a', x)))
+        p.map(AxisSetpoint::Position)
+            .or(v.map(AxisSetpoint::Velocity))
+            .or(a.map(AxisSetpoint::Acceleration))
     }
 
     fn validate(&self) -> Result<(), ConfigError> {
@@ -126,13 +126,40 @@ impl SetpointEntry {
     }
 }
 
+/// The horizontal axes that [`RandomSteps`] steps.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Axes {
+    /// North only.
+    #[default]
+    #[serde(rename = "n")]
+    N,
+    /// East only.
+    #[serde(rename = "e")]
+    E,
+    /// North and East.
+    #[serde(rename = "ne")]
+    Ne,
+}
+
+impl Axes {
+    /// Whether North is stepped.
+    pub fn north(self) -> bool {
+        matches!(self, Axes::N | Axes::Ne)
+    }
+
+    /// Whether East is stepped.
+    pub fn east(self) -> bool {
+        matches!(self, Axes::E | Axes::Ne)
+    }
+}
+
 /// The thesis's random velocity steps (section 4.6.1, table 4.1): step values and hold
 /// times drawn uniformly, seeded.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RandomSteps {
     /// Axes stepped: `n`, `e` or `ne`.
-    pub axes: String,
+    pub axes: Axes,
     /// Time of the first step [s].
     pub start: f64,
     /// Smallest velocity step value [m/s].
@@ -152,7 +179,7 @@ pub struct RandomSteps {
 impl Default for RandomSteps {
     fn default() -> Self {
         Self {
-            axes: "n".into(),
+            axes: Axes::N,
             start: 2.0,
             v_min: 0.0,
             v_max: 3.0,
@@ -166,12 +193,6 @@ impl Default for RandomSteps {
 
 impl RandomSteps {
     fn validate(&self) -> Result<(), ConfigError> {
-        if !["n", "e", "ne"].contains(&self.axes.as_str()) {
-            return Err(ConfigError::new(
-                "axes",
-                format!("must be \"n\", \"e\" or \"ne\" (got {:?})", self.axes),
-            ));
-        }
         non_negative("start", self.start)?;
         non_negative("v_min", self.v_min)?;
         in_range("v_max", self.v_max, self.v_min, 12.0)?;
@@ -202,10 +223,10 @@ impl RandomSteps {
                 t,
                 ..Default::default()
             };
-            if self.axes.contains('n') {
+            if self.axes.north() {
                 e.vn = Some(draw(&mut rng));
             }
-            if self.axes.contains('e') {
+            if self.axes.east() {
                 e.ve = Some(draw(&mut rng));
             }
             out.push(e);

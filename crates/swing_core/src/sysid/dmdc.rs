@@ -18,9 +18,9 @@
 //! The triangular factor (budget: one fit with q = 50, 120 s at 0.03 s, F ≈ 3950 × 104, in
 //! < 5 ms on one core). Only R is needed, never Q, and any R with RᵀR = FᵀF serves (row
 //! signs drop out of U, Σ and X'V). On smooth, noise-free flight data cond(F) ≈ 1e8–1e11,
-//! so the f64 Gram FᵀF (cond squared, beyond 1/u) cannot be factored, and the former route
-//! — f64 Gram + Cholesky, falling back to a Householder QR of F — paid for both (≈ 15 ms).
-//! Now (`gram` module) FᵀF is formed in double-double arithmetic (error-free TwoProd/TwoSum,
+//! so the f64 Gram FᵀF (cond squared, beyond 1/u) cannot be factored, and a Householder QR
+//! of F is accurate but O(N·C²), over budget. Instead (`gram` module) FᵀF is formed in
+//! double-double arithmetic (error-free TwoProd/TwoSum,
 //! ≈ 106-bit significand) and factored by a double-double Cholesky; squaring the condition
 //! number is harmless at that precision, and R rounded to f64 is at least as accurate as the
 //! Householder R (backward error ≈ u‖F‖). The Gram is cheap because F is block-Hankel: along
@@ -356,42 +356,8 @@ mod tests {
 
     /// Noise-free smooth flight (nonlinear pendulum, lagged vehicle, PID, RK4) like the bench.
     fn smooth_flight(samples: usize) -> (Vec<f64>, Vec<f64>) {
-        let (dt, mq, mp, l, g, fric, tau) = (0.03, 0.952, 0.2, 1.0, 9.81, 0.05, 0.1);
-        let deriv = |s: [f64; 4], cmd: f64| -> [f64; 4] {
-            let (sin, cos) = s[2].sin_cos();
-            [
-                s[1] + g * mp / mq * sin * cos,
-                (cmd - s[1]) / tau,
-                s[3],
-                -g * (mq + mp) / (mq * l) * sin - s[1] / l * cos - fric * s[3],
-            ]
-        };
         let refs = [1.2, 0.3, 2.5, -1.0, 1.7, 0.0, 2.9, 0.8];
-        let mut s = [0.0; 4];
-        let (mut integ, mut prev_e) = (0.0_f64, 0.0_f64);
-        let (mut x, mut u) = (Vec::new(), Vec::new());
-        let h = dt / 10.0;
-        for k in 0..samples {
-            let vref = refs[(k / 523) % refs.len()];
-            let e = vref - s[0];
-            integ += e * dt;
-            let cmd = (1.8 * e + 0.2 * integ + 0.05 * (e - prev_e) / dt).clamp(-4.0, 4.0);
-            prev_e = e;
-            x.extend([s[0], s[2]]);
-            u.push(cmd);
-            for _ in 0..10 {
-                let add =
-                    |a: [f64; 4], b: [f64; 4], c: f64| std::array::from_fn(|i| a[i] + c * b[i]);
-                let k1 = deriv(s, cmd);
-                let k2 = deriv(add(s, k1, h / 2.0), cmd);
-                let k3 = deriv(add(s, k2, h / 2.0), cmd);
-                let k4 = deriv(add(s, k3, h), cmd);
-                s = std::array::from_fn(|i| {
-                    s[i] + h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
-                });
-            }
-        }
-        (x, u)
+        crate::testing::smooth_pendulum_flight(samples, 0.03, |k| refs[(k / 523) % refs.len()])
     }
 
     fn singular_values(r: &Mat<f64>, k: usize) -> Vec<f64> {

@@ -12,6 +12,7 @@ use super::model::LinearModel;
 use super::search::{coarse_to_fine, grid_search, Candidate, SearchResult};
 use super::settings::{IdentifyMethod, IdentifySettings};
 use super::{dmdc, havokc, metrics, whitebox};
+use crate::plant::{PendulumModel, GRAVITY};
 
 /// A model and, when it came from a search, every scored candidate.
 #[derive(Clone, Debug)]
@@ -187,21 +188,17 @@ pub fn whitebox_model(
             (l, Some(f))
         }
     };
-    let params = whitebox::WhiteboxParams {
-        vehicle_mass: settings.vehicle_mass,
-        payload_mass,
-        length,
-        friction: settings.friction,
-        gravity: GRAVITY,
+    let params = PendulumModel {
+        m_q: settings.vehicle_mass,
+        m_p: payload_mass,
+        l: length,
+        c: settings.friction,
     };
     let model = whitebox::model(&params, axes, settings.dt, freq)?;
     let mut model = named(model, states, inputs)?;
     whitebox::apply_offset(&mut model, train, settings.offset)?;
     Ok(model)
 }
-
-/// Gravity of the white-box (the plant's).
-const GRAVITY: f64 = 9.81;
 
 /// Identify a model from resampled (and, if asked, smoothed) columns: `traj` holds the
 /// states named `states` and the inputs named `inputs`. The white-box needs

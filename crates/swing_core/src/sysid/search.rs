@@ -58,7 +58,8 @@ pub struct Grid {
 }
 
 impl Grid {
-    /// The reference grid of the issue: q = 2…60 step 2, p = 5…(n·q + m) step 5.
+    /// The reference grid of the search budget (DESIGN §8): q = 2…60 step 2,
+    /// p = 5…(n·q + m) step 5.
     pub fn reference() -> Self {
         Self {
             delays: (2..=60).step_by(2).collect(),

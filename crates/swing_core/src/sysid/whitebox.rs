@@ -1,17 +1,13 @@
-//! White-box baseline (thesis 4.3): the linearised floating pendulum with estimated
+//! White-box baseline (thesis 4.3): the linearised floating pendulum
+//! ([`PendulumModel`], eq. 5.7–5.8, states s = [v, θ, θ̇], ZOH-discretised) with estimated
 //! payload parameters.
 //!
-//! Continuous model (eq. 5.7, 5.8, states s = [v, θ̇, θ], input u = acceleration setpoint,
-//! with the *stable* sign of the swing stiffness — DESIGN §3 notes the seed's slip in 4.6):
-//!   v̇ = (c/(l m_Q)) θ̇ + (g m_p/m_Q) θ + u
-//!   θ̈ = −(c (m_Q+m_p)/(l² m_Q m_p)) θ̇ − (g (m_Q+m_p)/(m_Q l)) θ − u/l
 //! Cable length from the swing frequency (eq. 4.8): ω_n = √(g/l · (m_Q+m_p)/m_Q), so
 //! l = g (m_Q+m_p) / (m_Q ω_n²), with ω_n = 2π f and f the FFT peak in **Hz** (section
 //! 4.3.3 labels it rad/s, a slip). Payload mass by recursive least squares on hover thrust:
 //! T_z = (m_Q + m_p)(g − a_d) (NED, a_d the vertical acceleration), one scalar parameter.
-//!
-//! Discretisation: zero-order hold, [A_d B_d; 0 I] = exp([A B; 0 0]·dt) (scaling and
-//! squaring of a Taylor series).
+//! g is the plant's [`crate::plant::GRAVITY`]; the functions take it as an argument only so that a caller
+//! can state it explicitly.
 //!
 //! Delay form: the measured states are x = [v, θ] only (θ̇ is hidden, as for the data-driven
 //! models), so the model is written over z_k = [x_k; x_{k−1}] (q = 2), exactly. From
@@ -22,120 +18,16 @@
 //! once two samples of history exist), with no past input in the state. For several axes
 //! (states [v_1…v_a, θ_1…θ_a]) the axes are decoupled copies.
 
-use nalgebra::{DMatrix, DVector, Matrix3, Matrix4, Vector3};
+use nalgebra::{DMatrix, DVector};
 
 use super::dmdc::delay_form;
 use super::error::{config, data, SysidError};
 use super::hankel::Trajectory;
 use super::model::{LinearModel, Offset, WhiteboxEstimates};
+use crate::plant::PendulumModel;
 
-/// Standard gravity [m/s²].
-pub const G: f64 = 9.81;
-
-/// Physical parameters of the white-box model.
-#[derive(Clone, Debug, PartialEq)]
-pub struct WhiteboxParams {
-    /// Vehicle mass m_Q [kg].
-    pub vehicle_mass: f64,
-    /// Payload mass m_p [kg].
-    pub payload_mass: f64,
-    /// Cable length l [m].
-    pub length: f64,
-    /// Joint friction coefficient c [N·m·s/rad] (assumed known, thesis 4.3.1).
-    pub friction: f64,
-    /// Gravity g [m/s²].
-    pub gravity: f64,
-}
-
-impl Default for WhiteboxParams {
-    fn default() -> Self {
-        Self {
-            vehicle_mass: 0.952,
-            payload_mass: 0.2,
-            length: 1.0,
-            friction: 0.0,
-            gravity: G,
-        }
-    }
-}
-
-impl WhiteboxParams {
-    /// Check that every parameter is finite and in range; errors name the field.
-    pub fn validate(&self) -> Result<(), SysidError> {
-        for (name, v) in [
-            ("vehicle_mass", self.vehicle_mass),
-            ("payload_mass", self.payload_mass),
-            ("length", self.length),
-            ("gravity", self.gravity),
-        ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(config(format!("{name} must be positive, not {v}")));
-            }
-        }
-        if !(self.friction.is_finite() && self.friction >= 0.0) {
-            return Err(config(format!(
-                "friction must be ≥ 0, not {}",
-                self.friction
-            )));
-        }
-        Ok(())
-    }
-
-    /// Continuous (A, B) of eq. 5.7–5.8 over [v, θ̇, θ] (stable sign).
-    pub fn continuous(&self) -> (Matrix3<f64>, Vector3<f64>) {
-        let (mq, mp, l, c, g) = (
-            self.vehicle_mass,
-            self.payload_mass,
-            self.length,
-            self.friction,
-            self.gravity,
-        );
-        #[rustfmt::skip]
-        let a = Matrix3::new(
-            0.0, c / (l * mq), g * mp / mq,
-            0.0, -c * (mq + mp) / (l * l * mq * mp), -g * (mq + mp) / (l * mq),
-            0.0, 1.0, 0.0,
-        );
-        (a, Vector3::new(1.0, -1.0 / l, 0.0))
-    }
-
-    /// Zero-order-hold discretisation of [`Self::continuous`] at `dt` [s].
-    pub fn discrete(&self, dt: f64) -> (Matrix3<f64>, Vector3<f64>) {
-        let (a, b) = self.continuous();
-        let mut aug = Matrix4::<f64>::zeros();
-        aug.fixed_view_mut::<3, 3>(0, 0).copy_from(&(a * dt));
-        aug.fixed_view_mut::<3, 1>(0, 3).copy_from(&(b * dt));
-        let e = expm4(&aug);
-        (
-            e.fixed_view::<3, 3>(0, 0).into_owned(),
-            e.fixed_view::<3, 1>(0, 3).into_owned(),
-        )
-    }
-}
-
-/// Matrix exponential of a 4×4 matrix by scaling and squaring a Taylor series.
-pub fn expm4(m: &Matrix4<f64>) -> Matrix4<f64> {
-    let norm = m.abs().row_sum().max();
-    let mut s = 0;
-    let mut scale = 1.0;
-    while norm * scale > 0.25 {
-        scale *= 0.5;
-        s += 1;
-    }
-    let x = m * scale;
-    let mut term = Matrix4::<f64>::identity();
-    let mut sum = Matrix4::<f64>::identity();
-    for k in 1..=18 {
-        term = term * x / k as f64;
-        sum += term;
-    }
-    for _ in 0..s {
-        sum = sum * sum;
-    }
-    sum
-}
-
-/// Cable length from the swing frequency `freq_hz` (eq. 4.8).
+/// Cable length from the swing frequency `freq_hz` (eq. 4.8) under gravity `gravity`
+/// [m/s²] (the plant's is [`crate::plant::GRAVITY`]).
 pub fn cable_length(freq_hz: f64, vehicle_mass: f64, payload_mass: f64, gravity: f64) -> f64 {
     let w = 2.0 * std::f64::consts::PI * freq_hz;
     gravity * (vehicle_mass + payload_mass) / (vehicle_mass * w * w)
@@ -283,7 +175,7 @@ pub fn rls_mass(
 
 /// Top rows (2 × 4, 2 × 1) of the exact q = 2 delay form of one axis (see module docs).
 pub fn axis_delay_rows(
-    params: &WhiteboxParams,
+    params: &PendulumModel,
     dt: f64,
 ) -> Result<(DMatrix<f64>, DMatrix<f64>), SysidError> {
     params.validate()?;
@@ -292,32 +184,29 @@ pub fn axis_delay_rows(
     }
     let (ad, bd) = params.discrete(dt);
     let ad_inv = ad
+        .clone()
         .try_inverse()
         .ok_or_else(|| SysidError::Identification("discrete white-box A is singular".into()))?;
-    let c = nalgebra::Matrix2x3::new(1.0, 0.0, 0.0, 0.0, 0.0, 1.0);
-    let mut m = Matrix4::<f64>::zeros();
-    m.fixed_view_mut::<2, 3>(0, 0).copy_from(&c);
-    m.fixed_view_mut::<2, 3>(2, 0).copy_from(&(c * ad_inv));
-    m.fixed_view_mut::<2, 1>(2, 3)
-        .copy_from(&(-(c * ad_inv * bd)));
+    // Outputs [v, θ] of s = [v, θ, θ̇].
+    let c = DMatrix::from_row_slice(2, 3, &[1.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
+    let mut m = DMatrix::<f64>::zeros(4, 4);
+    m.view_mut((0, 0), (2, 3)).copy_from(&c);
+    m.view_mut((2, 0), (2, 3)).copy_from(&(&c * &ad_inv));
+    m.view_mut((2, 3), (2, 1))
+        .copy_from(&(-(&c * &ad_inv * &bd)));
     let m_inv = m.try_inverse().ok_or_else(|| {
         SysidError::Identification(
             "swing rate cannot be reconstructed from two samples at this dt".into(),
         )
     })?;
-    let l = m_inv.fixed_view::<3, 4>(0, 0).into_owned();
-    let top = c * ad * l;
-    let btop = c * bd;
-    Ok((
-        DMatrix::from_fn(2, 4, |i, j| top[(i, j)]),
-        DMatrix::from_fn(2, 1, |i, _| btop[i]),
-    ))
+    let l = m_inv.view((0, 0), (3, 4)).into_owned();
+    Ok((&c * &ad * l, &c * &bd))
 }
 
 /// The white-box model for `axes` decoupled axes (states [v…, θ…], inputs one per axis),
 /// in the q = 2 delay form, with the estimates recorded in the diagnostics.
 pub fn model(
-    params: &WhiteboxParams,
+    params: &PendulumModel,
     axes: usize,
     dt: f64,
     frequency_hz: Option<f64>,
@@ -353,11 +242,11 @@ pub fn model(
         &DVector::zeros(n),
     );
     out.diagnostics.whitebox = Some(WhiteboxEstimates {
-        vehicle_mass: params.vehicle_mass,
-        payload_mass: params.payload_mass,
-        length: params.length,
+        vehicle_mass: params.m_q,
+        payload_mass: params.m_p,
+        length: params.l,
         frequency_hz,
-        friction: params.friction,
+        friction: params.c,
     });
     Ok(out)
 }
@@ -406,21 +295,6 @@ mod tests {
     use super::*;
 
     #[test]
-    fn expm_of_rotation_generator() {
-        // exp([[0, −w], [w, 0]] t) is a rotation by w t.
-        let (w, t) = (2.0, 0.7);
-        let mut m = Matrix4::<f64>::zeros();
-        m[(0, 1)] = -w * t;
-        m[(1, 0)] = w * t;
-        m[(2, 3)] = 1.5; // nilpotent block: exp = I + N
-        let e = expm4(&m);
-        assert!((e[(0, 0)] - (w * t).cos()).abs() < 1e-14);
-        assert!((e[(1, 0)] - (w * t).sin()).abs() < 1e-14);
-        assert!((e[(2, 3)] - 1.5).abs() < 1e-14);
-        assert!((e[(3, 3)] - 1.0).abs() < 1e-15);
-    }
-
-    #[test]
     fn fft_matches_direct_dft() {
         let mut re: Vec<f64> = (0..8)
             .map(|k| (k as f64 * 0.3).sin() + 0.1 * k as f64)
@@ -441,10 +315,14 @@ mod tests {
 
     #[test]
     fn bad_parameters_name_the_field() {
-        let p = WhiteboxParams {
-            length: 0.0,
+        let p = PendulumModel {
+            l: 0.0,
             ..Default::default()
         };
-        assert!(p.validate().unwrap_err().to_string().contains("length"));
+        let e = axis_delay_rows(&p, 0.03).unwrap_err();
+        assert!(
+            matches!(e, SysidError::Config(ref s) if s.field == "l"),
+            "{e}"
+        );
     }
 }

@@ -5,14 +5,14 @@
 //! (the whole delay stack z is measured: it is built from the measured history),
 //! w ~ N(0, W), v ~ N(0, V). The a-priori covariance P solves the filter DARE
 //! P = A P Aᵀ − A P Cᵀ (C P Cᵀ + V)⁻¹ C P Aᵀ + W (the dual of the control DARE, solved by
-//! [`crate::control::lqr::dare`] on (Aᵀ, Cᵀ, W, V)); the filter gain is
+//! [`crate::control::riccati::dare`] on (Aᵀ, Cᵀ, W, V)); the filter gain is
 //! L = P Cᵀ (C P Cᵀ + V)⁻¹. Each tick: ξ̂_{k|k} = ξ̂_{k|k−1} + L (y_k − C ξ̂_{k|k−1}), and after
 //! the input is chosen ξ̂_{k+1|k} = A ξ̂_{k|k} + B u_k + c̃. Both steps are matrix–vector
 //! products into preallocated buffers (no allocation per tick).
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::control::lqr::dare;
+use crate::control::riccati::dare;
 use crate::control::ControlError;
 
 /// A steady-state (constant-gain) Kalman filter with measured block C = [I_ny 0].

@@ -26,6 +26,7 @@ pub use self::condense::DisturbanceModel;
 use self::condense::{condense, Augmented, Condensed, Weights};
 use self::estimator::SteadyStateKalman;
 use self::qp::{Bounds, ClarabelQp};
+use super::layout::{AxisLayout, Measured};
 use super::{AxisState, ControlError, SwingController, TickInfo, TickKind};
 use crate::config::{non_negative, positive, ConfigError};
 use crate::sysid::LinearModel;
@@ -93,9 +94,8 @@ impl Default for MpcSettings {
             control_horizon: 20,
             w_velocity: 1.0,
             // Tuned on the thesis's experiment matrix (payload grid, wind, double pendulum,
-            // mass change; `swingrt experiment`): peak swing ≈ 6.5° against the LQR's 10°,
-            // swing IAE ≤ 0.31× PX4 PID's except the mass-change case. 2/1 (the previous
-            // default) left heavy short cables above a third of PID's swing IAE.
+            // mass change; `swingrt experiment`): a swing-rate weight well above the input-rate
+            // weight is what damps heavy payloads on short cables.
             w_swing_rate: 6.0,
             w_swing: 0.0,
             w_acc: 0.0,
@@ -107,8 +107,8 @@ impl Default for MpcSettings {
             kf_disturbance_noise: 0.02,
             // A swing disturbance that adapts as fast as the velocity one lets the estimator
             // explain a model's slow-mode mismatch as a payload force, and the loop creeps or
-            // runs away (24 of 84 seeded experiment flights with the NMAE-best model did
-            // not settle; benches/robustness.py); at 0.1 that is 9 of 84, and the wind step settles to ≤ 0.001 m/s.
+            // runs away; a tenth of the velocity disturbance's rate avoids that and still
+            // lets a wind step settle.
             kf_swing_disturbance_scale: 0.1,
             kf_measurement_noise: 0.01,
             solver: QpSolverKind::ActiveSet,
@@ -163,14 +163,6 @@ impl MpcSettings {
     }
 }
 
-/// Where a model state comes from in the measured [`AxisState`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Source {
-    V(usize),
-    Swing(usize),
-    SwingRate(usize),
-}
-
 enum Backend {
     None,
     Clarabel(Box<ClarabelQp>),
@@ -184,7 +176,7 @@ pub struct MpcController {
     n: usize,
     nz: usize,
     m: usize,
-    sources: Vec<Source>,
+    sources: Vec<Measured>,
     /// Per axis: index of the swing in the newest frame.
     is: Vec<usize>,
     aug: Augmented,
@@ -213,13 +205,6 @@ impl std::fmt::Debug for MpcController {
             .field("delays", &(self.nz / self.n))
             .field("axes", &self.m)
             .finish()
-    }
-}
-
-fn axis_suffix(input: &str, a: usize) -> String {
-    match input.strip_prefix("acc_sp_") {
-        Some(s) if !s.is_empty() => s.to_string(),
-        _ => ["n", "e"][a].to_string(),
     }
 }
 
@@ -277,46 +262,22 @@ impl MpcController {
         let nz = n * q;
         let dt = model.dt;
         // Map model states onto the measured axis states.
-        let mut sources = Vec::with_capacity(n);
-        let suffixes: Vec<String> = (0..m).map(|a| axis_suffix(&model.inputs[a], a)).collect();
-        for name in &model.states {
-            let mut found = None;
-            for (a, s) in suffixes.iter().enumerate() {
-                if *name == format!("v{s}") {
-                    found = Some(Source::V(a));
-                } else if *name == format!("swing_{s}") {
-                    found = Some(Source::Swing(a));
-                } else if *name == format!("swing_rate_{s}") {
-                    found = Some(Source::SwingRate(a));
-                }
-            }
-            match found {
-                Some(src) => sources.push(src),
-                None => {
-                    return Err(ControlError::Model(format!(
-                    "model state '{name}' is not one the controller measures on axes {suffixes:?} \
-                         (expected v<axis>, swing_<axis> or swing_rate_<axis>)"
-                )))
-                }
-            }
-        }
-        let mut iv = vec![usize::MAX; m];
-        let mut is = vec![usize::MAX; m];
-        for (k, src) in sources.iter().enumerate() {
-            match *src {
-                Source::V(a) => iv[a] = k,
-                Source::Swing(a) => is[a] = k,
-                Source::SwingRate(_) => {}
-            }
-        }
-        for a in 0..m {
-            if iv[a] == usize::MAX || is[a] == usize::MAX {
-                return Err(ControlError::Model(format!(
-                    "model lacks v{0} or swing_{0} for input '{1}'",
-                    suffixes[a], model.inputs[a]
-                )));
-            }
-        }
+        let layout = AxisLayout::from_model(model)?;
+        let sources = model
+            .states
+            .iter()
+            .map(|name| {
+                layout.classify(name).ok_or_else(|| {
+                    ControlError::Model(format!(
+                        "model state '{name}' is not one the controller measures on axes {:?} \
+                         (expected v<axis>, swing_<axis> or swing_rate_<axis>)",
+                        layout.suffixes()
+                    ))
+                })
+            })
+            .collect::<Result<Vec<Measured>, _>>()?;
+        let iv: Vec<usize> = layout.axes().iter().map(|a| a.v).collect();
+        let is: Vec<usize> = layout.axes().iter().map(|a| a.swing).collect();
         let aug = Augmented::new(
             &model.a,
             &model.b,
@@ -352,7 +313,7 @@ impl MpcController {
                 settings.kf_process_noise.powi(2)
             } else {
                 let swing = settings.disturbance == DisturbanceModel::State
-                    && !matches!(sources[i - nm], Source::V(_));
+                    && !matches!(sources[i - nm], Measured::V(_));
                 let scale = if swing {
                     settings.kf_swing_disturbance_scale
                 } else {
@@ -461,9 +422,9 @@ impl MpcController {
         ys.copy_within(0..nz - n, n);
         for (k, src) in self.sources.iter().enumerate() {
             ys[k] = match *src {
-                Source::V(a) => state[a].v,
-                Source::Swing(a) => state[a].swing,
-                Source::SwingRate(a) => state[a].swing_rate,
+                Measured::V(a) => state[a].v,
+                Measured::Swing(a) => state[a].swing,
+                Measured::SwingRate(a) => state[a].swing_rate,
             };
         }
     }

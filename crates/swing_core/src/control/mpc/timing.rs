@@ -2,7 +2,7 @@
 //! `swingrt bench` and the criterion bench): per-tick wall time of
 //! [`SwingController::step`] (Kalman update included), median and 99th percentile.
 //!
-//! The plant is the identified model itself, z⁺ = A z + B (u − ū) + c, driven by a square
+//! The plant is the identified model itself ([`LinearPlant`]), driven by a square
 //! wave of velocity references (±`amplitude` every `period_s`). Unconstrained runs remove
 //! every bound and time all ticks; constrained runs keep (or, if the settings have none,
 //! add) a bound of 1 m/s² on the acceleration setpoint and time only the ticks on which
@@ -10,10 +10,8 @@
 
 use std::time::Instant;
 
-use nalgebra::DVector;
-
 use super::{MpcController, MpcSettings};
-use crate::control::{AxisState, ControlError, SwingController, TickKind};
+use crate::control::{AxisState, ControlError, LinearPlant, SwingController, TickKind};
 use crate::sysid::LinearModel;
 
 /// Timing summary of MPC ticks [µs].
@@ -52,7 +50,7 @@ pub fn tick_timing(
     }
     let mut ctrl = MpcController::new(model, s)?;
     let mut times = Vec::with_capacity(n_ticks);
-    let mut plant = ModelPlant::new(model);
+    let mut plant = LinearPlant::new(model)?;
     let m = ctrl.axes();
     let mut state = vec![AxisState::default(); m];
     let mut refs = vec![0.0; m];
@@ -97,66 +95,4 @@ pub fn tick_timing(
         mean_us: times.iter().sum::<f64>() / times.len() as f64,
         ticks: times.len(),
     })
-}
-
-/// The identified model used as a plant, with the measured axis state read off its newest
-/// frames (swing rate by backward difference unless the model has it as a state).
-pub struct ModelPlant {
-    model: LinearModel,
-    z: DVector<f64>,
-    next: DVector<f64>,
-    du: DVector<f64>,
-    idx: Vec<(usize, usize, Option<usize>)>,
-}
-
-impl ModelPlant {
-    /// Start at z = 0 (the model must be one [`MpcController::new`] accepts).
-    pub fn new(model: &LinearModel) -> Self {
-        let n = model.states.len();
-        let find = |name: &str| model.states.iter().position(|s| s == name);
-        let idx = (0..model.inputs.len())
-            .map(|a| {
-                let sfx = ["n", "e"][a.min(1)];
-                let iv = find(&format!("v{sfx}")).unwrap_or(0);
-                let is = find(&format!("swing_{sfx}")).unwrap_or(n.saturating_sub(1));
-                (iv, is, find(&format!("swing_rate_{sfx}")))
-            })
-            .collect();
-        Self {
-            z: DVector::zeros(model.a.nrows()),
-            next: DVector::zeros(model.a.nrows()),
-            du: DVector::zeros(model.b.ncols()),
-            model: model.clone(),
-            idx,
-        }
-    }
-
-    /// Write the measured state of each axis.
-    pub fn measure(&self, out: &mut [AxisState]) {
-        let n = self.model.states.len();
-        let q = self.model.delays;
-        for (o, &(iv, is, ir)) in out.iter_mut().zip(&self.idx) {
-            let rate = match ir {
-                Some(i) => self.z[i],
-                None if q >= 2 => (self.z[is] - self.z[is + n]) / self.model.dt,
-                None => 0.0,
-            };
-            *o = AxisState {
-                v: self.z[iv],
-                swing: self.z[is],
-                swing_rate: rate,
-            };
-        }
-    }
-
-    /// Advance one step with input `u`.
-    pub fn step(&mut self, u: &[f64]) {
-        for (i, d) in self.du.iter_mut().enumerate() {
-            *d = u[i] - self.model.input_mean[i];
-        }
-        self.next.copy_from(&self.model.c);
-        self.next.gemv(1.0, &self.model.a, &self.z, 1.0);
-        self.next.gemv(1.0, &self.model.b, &self.du, 1.0);
-        std::mem::swap(&mut self.z, &mut self.next);
-    }
 }

@@ -1,0 +1,226 @@
+//! Supervision of the swing controller that replaces PX4's velocity PID: attach, engage at
+//! a set time with a bumpless start, enforce the per-tick compute budget, and hand the axes
+//! back to PX4 for the rest of the run (bumplessly) when a tick fails, is late or returns a
+//! non-finite command.
+
+use std::time::Instant;
+
+use nalgebra::Vector3;
+
+use super::runner::TickStats;
+use super::ticker::Ticker;
+use crate::config::{non_negative, positive, ConfigError};
+use crate::control::px4::{AxisSetpoint, Px4Cascade, Px4Params, Setpoint};
+use crate::control::{AxisState, SwingController, TickKind};
+
+/// An attached controller and its schedule.
+struct Attached {
+    ctrl: Box<dyn SwingController>,
+    ticker: Ticker,
+    budget: f64,
+    engage_at: f64,
+    started: bool,
+    /// Last accepted acceleration command per axis [m/s²].
+    acc: [f64; 2],
+    /// Velocity reference of the last tick per axis [m/s].
+    vel_ref: [f64; 2],
+}
+
+/// What a controller tick reads from the simulation.
+pub(crate) struct TickInputs<'a> {
+    /// Time [s].
+    pub t: f64,
+    /// Measured swing angles N, E [rad].
+    pub swing: [f64; 2],
+    /// Swing rates N, E [rad/s].
+    pub swing_rate: [f64; 2],
+    /// Measured position (NED) [m].
+    pub pos: &'a Vector3<f64>,
+    /// Measured velocity (NED) [m/s].
+    pub vel: &'a Vector3<f64>,
+    /// PX4 parameters (position gains and limits, velocity P gains for the hand-back).
+    pub px4: &'a Px4Params,
+}
+
+/// The swing controller's supervisor (see module docs); without a controller it does nothing.
+#[derive(Default)]
+pub(crate) struct ControllerSupervisor {
+    attached: Option<Attached>,
+    active: bool,
+    fallback: bool,
+    fallback_reason: Option<String>,
+    stats: TickStats,
+}
+
+impl ControllerSupervisor {
+    /// Attach `ctrl` at physics step `step` of size `h` [s]; its ticks fall on the multiples
+    /// of its period in physics steps, counted from step 0.
+    pub(crate) fn attach(
+        &mut self,
+        ctrl: Box<dyn SwingController>,
+        engage_at: f64,
+        budget: f64,
+        h: f64,
+        step: u64,
+    ) -> Result<(), ConfigError> {
+        let period = ctrl.period();
+        let steps = period / h;
+        if !(steps >= 1.0 - 1e-9 && (steps - steps.round()).abs() < 1e-6) {
+            return Err(ConfigError::new(
+                "controller.period",
+                format!("{period} s is not a multiple of the physics step {h} s"),
+            ));
+        }
+        if !(1..=2).contains(&ctrl.axes()) {
+            return Err(ConfigError::new(
+                "controller.axes",
+                "must be 1 (N) or 2 (N+E)",
+            ));
+        }
+        non_negative("controller.engage_at", engage_at)?;
+        positive("controller.budget", budget)?;
+        self.attached = Some(Attached {
+            ctrl,
+            ticker: Ticker::at_step(steps.round() as u64, step),
+            budget,
+            engage_at,
+            started: false,
+            acc: [0.0; 2],
+            vel_ref: [0.0; 2],
+        });
+        Ok(())
+    }
+
+    /// Advance the controller's ticker by one physics step; true when a tick is due and the
+    /// controller has not been handed back.
+    #[inline]
+    pub(crate) fn due(&mut self) -> bool {
+        let due = match self.attached.as_mut() {
+            Some(a) => a.ticker.due(),
+            None => false,
+        };
+        due && !self.fallback
+    }
+
+    /// Whether the controller's command currently replaces PX4's velocity PID.
+    pub(crate) fn active(&self) -> bool {
+        self.active
+    }
+
+    /// Whether the controller has been handed back to PX4.
+    pub(crate) fn fell_back(&self) -> bool {
+        self.fallback
+    }
+
+    /// Why the controller was handed back, if it was.
+    pub(crate) fn fallback_reason(&self) -> Option<&str> {
+        self.fallback_reason.as_deref()
+    }
+
+    /// Tick timings so far.
+    pub(crate) fn stats(&self) -> &TickStats {
+        &self.stats
+    }
+
+    /// Predicted outputs of the controller's last tick, if it predicts.
+    pub(crate) fn prediction(&mut self) -> Option<Vec<f64>> {
+        self.attached.as_mut().and_then(|a| a.ctrl.prediction())
+    }
+
+    /// Replace the controlled axes' setpoints by the controller's acceleration while active.
+    pub(crate) fn override_setpoint(&self, sp: &mut Setpoint) {
+        if let (true, Some(a)) = (self.active, &self.attached) {
+            for i in 0..a.ctrl.axes() {
+                sp.axes[i] = AxisSetpoint::Acceleration(a.acc[i]);
+            }
+        }
+    }
+
+    /// Replace the controlled axes' velocity setpoints by the controller's reference while
+    /// active (for the trace).
+    pub(crate) fn override_velocity(&self, vel_sp: &mut Vector3<f64>) {
+        if let (true, Some(a)) = (self.active, &self.attached) {
+            for i in 0..a.ctrl.axes() {
+                vel_sp[i] = a.vel_ref[i];
+            }
+        }
+    }
+
+    /// One controller tick (call when [`Self::due`]): engage (bumplessly) once the engage
+    /// time is reached, step, time it, and fall back to PX4 on error, overrun or a
+    /// non-finite command. `sp` and `fc` are PX4's setpoint and cascade.
+    pub(crate) fn tick(&mut self, inp: &TickInputs<'_>, sp: &mut Setpoint, fc: &mut Px4Cascade) {
+        let t = inp.t;
+        let Some(a) = self.attached.as_mut() else {
+            return;
+        };
+        if t + 1e-9 < a.engage_at {
+            return;
+        }
+        let axes = a.ctrl.axes();
+        let mut states = [AxisState::default(); 2];
+        let mut vel_ref = [0.0; 2];
+        for i in 0..axes {
+            states[i] = AxisState {
+                v: inp.vel[i],
+                swing: inp.swing[i],
+                swing_rate: inp.swing_rate[i],
+            };
+            vel_ref[i] = match sp.axes[i] {
+                AxisSetpoint::Velocity(v) => v,
+                AxisSetpoint::Position(x) => ((x - inp.pos[i]) * inp.px4.pos_p[i])
+                    .clamp(-inp.px4.vel_max_xy, inp.px4.vel_max_xy),
+                AxisSetpoint::Acceleration(_) => 0.0,
+            };
+        }
+        if !a.started {
+            let acc = [fc.acc_sp.x, fc.acc_sp.y];
+            a.ctrl.reset(&states[..axes], &acc[..axes]);
+            a.acc = acc;
+            a.started = true;
+        }
+        let mut out = [0.0; 2];
+        let t0 = Instant::now();
+        let res = a
+            .ctrl
+            .step(&states[..axes], &vel_ref[..axes], &mut out[..axes]);
+        let elapsed = t0.elapsed().as_secs_f64();
+        self.stats.tick_us.push(elapsed * 1e6);
+        let reason = match &res {
+            Err(e) => Some(format!("controller error: {e}")),
+            Ok(_) if elapsed > a.budget => Some(format!(
+                "tick took {:.3} ms, over its {:.3} ms budget",
+                elapsed * 1e3,
+                a.budget * 1e3
+            )),
+            Ok(_) if out[..axes].iter().any(|x| !x.is_finite()) => {
+                Some("controller output is not finite".to_string())
+            }
+            Ok(_) => None,
+        };
+        if let Ok(info) = res {
+            if info.kind == TickKind::Constrained {
+                self.stats.constrained += 1;
+            }
+        }
+        a.vel_ref = vel_ref;
+        match reason {
+            None => {
+                a.acc = out;
+                self.active = true;
+            }
+            Some(r) => {
+                // Bumpless hand-back: PX4's velocity integrator takes the last command.
+                for i in 0..axes {
+                    let err = vel_ref[i] - inp.vel[i];
+                    let v = a.acc[i] - err * inp.px4.vel_p[i];
+                    fc.set_velocity_integrator(i, v);
+                    sp.axes[i] = AxisSetpoint::Velocity(vel_ref[i]);
+                }
+                self.active = false;
+                self.fallback = true;
+                self.fallback_reason = Some(format!("t = {t:.2} s: {r}"));
+            }
+        }
+    }
+}
