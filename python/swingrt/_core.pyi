@@ -29,6 +29,7 @@ __all__ = [
     "pendulum_model",
     "select_for_control",
     "sim_real_time_factor",
+    "step_overshoot",
     "sysid_cable_length",
     "sysid_fft_peak",
     "sysid_rls_mass",
@@ -248,6 +249,7 @@ def mpc_step_check(
     duration: float = 20.0,
     input_lags: list[float] = ...,
 ) -> list[dict[str, float]]: ...
+def step_overshoot(v: npt.NDArray[np.float64], v_before: float, v_after: float) -> float: ...
 def care(
     a: npt.NDArray[np.float64],
     b: npt.NDArray[np.float64],

@@ -6,7 +6,8 @@ the step direction), over the window after the step:
 - ``peak_swing_deg``: largest |swing| [deg] (swing magnitude for two axes);
 - ``swing_settle_s``: time after ``t0`` from which |swing − final| < 1° for good [s];
 - ``swing_iae_deg_s``: ∫ |swing − final| dt [deg·s];
-- ``overshoot_pct``: (peak velocity − final) / |step| · 100 along the step [%];
+- ``overshoot_pct``: largest excursion of the velocity beyond the new setpoint, in % of the
+  step (the core's ``step_overshoot``, the definition the closed-loop step check uses too);
 - ``v_settle_s``: time after ``t0`` from which |v − v_sp| < 5 % of the step for good [s];
 - ``ss_error``: |v_sp − mean v over the last 2 s| [m/s];
 - ``effort``: ∫ |a_sp|² dt of the horizontal acceleration setpoint [m²/s³].
@@ -26,6 +27,7 @@ import math
 
 import numpy as np
 
+from swingrt import _core
 from swingrt.errors import DataError
 
 #: Metric names in ``metrics.csv`` order.
@@ -106,8 +108,7 @@ def step_metrics(
     tail = tw >= tw[-1] - 2.0
     final_swing = float(np.mean(sw[tail]))
     step = va - vb
-    peak_v = float(np.max(vw * np.sign(step or 1.0))) * np.sign(step or 1.0)
-    overshoot = 100.0 * (peak_v - va) / abs(step) * np.sign(step) if step else 0.0
+    overshoot = 100.0 * _core.step_overshoot(np.ascontiguousarray(vw, dtype=float), vb, va)
     a2 = an[win] ** 2 + ae[win] ** 2
     return {
         "peak_swing_deg": float(np.degrees(np.max(np.abs(sw)))),

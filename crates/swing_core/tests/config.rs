@@ -66,3 +66,15 @@ fn identify_settings_roundtrip_through_json() {
     let text = serde_json::to_string(&s).unwrap();
     assert_eq!(IdentifySettings::from_json(&text).unwrap(), s);
 }
+
+#[test]
+fn overshoot_is_the_excursion_beyond_the_new_setpoint_in_steps() {
+    use swing_core::control::check::{excursion, overshoot};
+    // A 2 m/s step up that peaks at 2.5: 25 % of the step beyond the setpoint.
+    assert_eq!(overshoot(&[0.5, 1.9, 2.5, 2.1], 0.0, 2.0), 0.25);
+    // A step down from 2 to 0 that dips to −0.4: 20 %; never reaching it: negative.
+    assert!((overshoot(&[1.0, -0.4, 0.1], 2.0, 0.0) - 0.2).abs() < 1e-15);
+    assert!(overshoot(&[0.0, 1.0, 1.5], 0.0, 2.0) < 0.0);
+    assert_eq!(excursion(3.0, 1.0, 1.0), 0.0);
+    assert_eq!(overshoot(&[], 0.0, 1.0), f64::NEG_INFINITY);
+}

@@ -423,6 +423,14 @@ fn mpc_step_check<'py>(
         .collect()
 }
 
+/// Largest excursion of the velocities `v` beyond the new setpoint `v_after` of a step from
+/// `v_before`, as a fraction of the step (the one overshoot definition; −∞ for no samples).
+#[pyfunction]
+fn step_overshoot(v: &Bound<'_, PyAny>, v_before: f64, v_after: f64) -> PyResult<f64> {
+    let v = convert::array1(v, "v")?;
+    Ok(check::overshoot(v.as_slice()?, v_before, v_after))
+}
+
 /// Register this domain's functions and classes on the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyMpc>()?;
@@ -432,5 +440,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mpc_tick_timing, m)?)?;
     m.add_function(wrap_pyfunction!(pendulum_model, m)?)?;
     m.add_function(wrap_pyfunction!(mpc_step_check, m)?)?;
+    m.add_function(wrap_pyfunction!(step_overshoot, m)?)?;
     Ok(())
 }

@@ -92,8 +92,8 @@ impl PyScenario {
     }
 
     /// Every field as TOML text.
-    fn to_toml(&self) -> String {
-        self.inner.to_toml()
+    fn to_toml(&self) -> PyResult<String> {
+        self.inner.to_toml().map_err(to_py)
     }
 
     /// Name used in reports.

@@ -60,10 +60,30 @@ impl StepCheckSettings {
     }
 }
 
+/// Excursion of a velocity `v` beyond the new setpoint `v_after` of a step from `v_before`,
+/// as a fraction of the step (≤ 0 while short of the setpoint; 0 for no step). The one
+/// definition of overshoot: the step check's and the flight metrics' (`overshoot_pct` =
+/// 100 × the largest excursion after the step, at least 0).
+pub fn excursion(v: f64, v_before: f64, v_after: f64) -> f64 {
+    let step = v_after - v_before;
+    if step == 0.0 {
+        0.0
+    } else {
+        (v - v_after) * step.signum() / step.abs()
+    }
+}
+
+/// Largest [`excursion`] over the velocities `v` after a step (−∞ for no samples).
+pub fn overshoot(v: &[f64], v_before: f64, v_after: f64) -> f64 {
+    v.iter()
+        .map(|x| excursion(*x, v_before, v_after))
+        .fold(f64::NEG_INFINITY, f64::max)
+}
+
 /// Outcome of a closed-loop step check; errors are worst over the axes, relative to the step.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepCheck {
-    /// Largest excursion beyond the new setpoint, as a fraction of the step (≤ 0: none).
+    /// Largest [`excursion`] beyond the new setpoint, as a fraction of the step (≤ 0: none).
     pub overshoot: f64,
     /// |v − setpoint| at the end, as a fraction of the step (∞ when the loop diverged).
     pub final_error: f64,
@@ -153,8 +173,7 @@ pub fn step_check_with(
             if k < step_tick {
                 result.hold_drift = result.hold_drift.max(v.abs() / step);
             } else {
-                let beyond = (v - check.step) * check.step.signum() / step;
-                result.overshoot = result.overshoot.max(beyond);
+                result.overshoot = result.overshoot.max(excursion(v, 0.0, check.step));
             }
             vel_ref[a] = if k >= step_tick { check.step } else { 0.0 };
         }

@@ -449,8 +449,8 @@ impl Scenario {
     }
 
     /// The same scenario serialised as TOML (for reports and reproducibility).
-    pub fn to_toml(&self) -> String {
-        toml::to_string(self).unwrap_or_default()
+    pub fn to_toml(&self) -> Result<String, ConfigError> {
+        toml::to_string(self).map_err(|e| ConfigError::new("scenario", e.to_string()))
     }
 }
 
@@ -499,7 +499,7 @@ mod tests {
     #[test]
     fn round_trip_through_toml() {
         let sc = Scenario::default_step();
-        let back = Scenario::from_toml(&sc.to_toml()).unwrap();
+        let back = Scenario::from_toml(&sc.to_toml().unwrap()).unwrap();
         assert_eq!(back, sc);
     }
 }
