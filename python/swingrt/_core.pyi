@@ -177,7 +177,7 @@ def evaluate(
     x: npt.NDArray[np.float64],
     u: npt.NDArray[np.float64],
     *,
-    rollout: int,
+    rollout_samples: int,
     starts: int = 10,
 ) -> tuple[list[float], float]: ...
 def whitebox_payload_mass(

@@ -325,7 +325,7 @@ def evaluate(
         model,
         np.ascontiguousarray(x),
         np.ascontiguousarray(u),
-        rollout=max(1, int(round(rollout / model.dt))),
+        rollout_samples=max(1, int(round(rollout / model.dt))),
         starts=starts,
     )
     return {"nmae": mean, "per_state": {s: per[i] for i, s in enumerate(model.states)}}

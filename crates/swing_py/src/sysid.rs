@@ -447,22 +447,23 @@ fn select_for_control<'py>(
     Ok((PyLinearModel::wrap(py, picked.model)?, picked.passed))
 }
 
-/// Held-out rollout NMAE of `model` on (x, u): returns (per-state list, mean).
+/// Held-out rollout NMAE of `model` on (x, u) over `rollout_samples` steps from `starts`
+/// start points: returns (per-state list, mean).
 #[pyfunction]
-#[pyo3(signature = (model, x, u, *, rollout, starts=10))]
+#[pyo3(signature = (model, x, u, *, rollout_samples, starts=10))]
 fn evaluate(
     py: Python<'_>,
     model: &PyLinearModel,
     x: &Bound<'_, PyAny>,
     u: &Bound<'_, PyAny>,
-    rollout: usize,
+    rollout_samples: usize,
     starts: usize,
 ) -> PyResult<(Vec<f64>, f64)> {
     let model = model.inner.clone();
     let data = Columns::new(x, u, &model.states, &model.inputs)?;
     let traj = data.trajectory()?;
     let nm = py
-        .detach(|| rollout_nmae(&model, &traj, rollout, starts))
+        .detach(|| rollout_nmae(&model, &traj, rollout_samples, starts))
         .map_err(to_py)?;
     Ok((nm.per_state, nm.mean))
 }
