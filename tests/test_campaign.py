@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from swingrt.campaign import fly_sample, load_spec, parse_spec, read_rows
+from swingrt.campaign import failure_reason, fly_sample, load_spec, parse_spec, read_rows
 from swingrt.campaign.report import wilson, worst_samples
 from swingrt.campaign.sampling import draw, parse_distribution
 from swingrt.errors import ConfigError
@@ -158,6 +158,28 @@ def test_same_seed_and_index_fly_the_same_row(tmp_path):
     assert rows_equal(a, b)
     assert [r["controller"] for r in a] == ["pid", "lqr", "mpc"]
     assert a[0]["q"] is not None and a[0]["p"] is not None and a[0]["test_nmae"] > 0
+
+
+def test_failure_rule():
+    ok = {
+        "controller": "mpc",
+        "error": "",
+        "fallback": "",
+        "peak_swing_deg": 10.0,
+        "v_settle_s": 3.0,
+        "ss_error": 0.01,
+        "swing_excess_deg_s": 0.5,
+        "swing_excess_vs_pid": 0.05,
+    }
+    assert failure_reason(ok) == ""
+    assert failure_reason({**ok, "fallback": "solver"}) == "fallback"
+    assert failure_reason({**ok, "v_settle_s": math.inf}) == "v_not_settled"
+    assert failure_reason({**ok, "ss_error": 0.02}) == "ss_error"
+    assert failure_reason({**ok, "peak_swing_deg": 80.0}) == "diverged"
+    assert failure_reason({**ok, "swing_excess_deg_s": 5.0, "swing_excess_vs_pid": 0.5}) == "swing"
+    assert failure_reason({**ok, "swing_excess_vs_pid": 0.5}) == ""  # excess below 1 deg·s
+    pid = {**ok, "controller": "pid", "swing_excess_deg_s": 5.0, "swing_excess_vs_pid": 1.0}
+    assert failure_reason(pid) == ""
 
 
 def test_wilson_interval():

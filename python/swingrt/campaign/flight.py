@@ -12,9 +12,12 @@ spec as plain data and returns plain rows.
 - ``diverged``: a metric is NaN, or the peak swing exceeds 60° (the simulator's payload
   left the useful range);
 - ``v_not_settled``: the velocity never stayed within 5 % of the step (``v_settle_s`` = ∞);
-- ``ss_error``: the steady-state velocity error is >= 0.02 m/s.
+- ``ss_error``: the steady-state velocity error is >= 0.02 m/s;
+- ``swing``: (LQR, MPC, when PID is flown too) the swing IAE's excess above its floor
+  (:func:`~swingrt.metrics.swing_iae_floor`, what no controller can remove) is >= 0.4× PID's
+  excess in the same sample and >= 1 deg·s: the controller does not damp the swing.
 
-PX4 PID is flown as the reference; it is held to the same rule.
+PX4 PID is flown as the reference; it is held to the rules but the last.
 """
 
 from __future__ import annotations
@@ -29,16 +32,22 @@ from swingrt.metrics import METRICS, step_metrics, swing_iae_floor
 SS_ERROR_LIMIT = 0.02
 #: Peak swing above which a flight counts as diverged [deg].
 DIVERGED_SWING_DEG = 60.0
+#: Swing IAE excess, as a fraction of PID's, at or above which a flight fails.
+SWING_EXCESS_RATIO = 0.4
+#: ... unless the excess is below this [deg·s].
+SWING_EXCESS_MIN = 1.0
 
 #: Identification columns of a row.
 IDENT_COLUMNS = ("q", "p", "test_nmae", "control_check_passed", "wb_payload_mass", "wb_length")
 #: Columns added besides :data:`swingrt.metrics.METRICS` (the swing IAE's floor and excess).
 EXTRA_METRICS = tuple(c for c in ("swing_floor_deg_s", "swing_excess_deg_s") if c not in METRICS)
+#: The swing IAE excess over PID's in the same sample (NaN when PID is not flown).
+RATIO = "swing_excess_vs_pid"
 
 
 def metric_columns() -> tuple[str, ...]:
     """Every metric column: ``metrics.csv``'s, then the floor and excess of the swing IAE."""
-    return tuple(METRICS) + EXTRA_METRICS
+    return tuple(METRICS) + EXTRA_METRICS + (RATIO,)
 
 
 def param_columns(values: dict[str, Any]) -> dict[str, Any]:
@@ -68,6 +77,14 @@ def failure_reason(row: dict[str, Any]) -> str:
         return "v_not_settled"
     if row.get("ss_error", 0.0) >= SS_ERROR_LIMIT:
         return "ss_error"
+    ratio = row.get(RATIO, math.nan)
+    if (
+        row.get("controller") != "pid"
+        and ratio is not None
+        and ratio >= SWING_EXCESS_RATIO
+        and row.get("swing_excess_deg_s", 0.0) >= SWING_EXCESS_MIN
+    ):
+        return "swing"
     return ""
 
 
@@ -139,8 +156,11 @@ def fly_sample(
             metrics = {c: float(m.get(c, math.nan)) for c in METRICS}
             if EXTRA_METRICS:
                 floor = swing_iae_floor(trace, t0=exp.step["t"], axis=axis)
-                metrics["swing_floor_deg_s"] = floor
-                metrics["swing_excess_deg_s"] = metrics["swing_iae_deg_s"] - floor
+                extra = {
+                    "swing_floor_deg_s": floor,
+                    "swing_excess_deg_s": metrics["swing_iae_deg_s"] - floor,
+                }
+                metrics.update({c: extra[c] for c in EXTRA_METRICS})
             row.update(metrics)
             row["fallback"] = str(extras.get("fallback") or "")
             traces[ctrl] = trace
@@ -149,8 +169,12 @@ def fly_sample(
         except Exception as exc:  # noqa: BLE001 - as above
             row.update(nan_metrics)
             row["error"] = f"{type(exc).__name__}: {exc}"
-        row["failure"] = failure_reason(row)
         rows.append(row)
+    pid = next((r for r in rows if r["controller"] == "pid"), None)
+    for row in rows:
+        ref = math.nan if pid is None else pid.get("swing_excess_deg_s", math.nan)
+        row[RATIO] = row["swing_excess_deg_s"] / ref if ref and ref > 0 else math.nan
+        row["failure"] = failure_reason(row)
     return rows, traces
 
 

@@ -24,6 +24,8 @@ from swingrt.campaign.flight import (
     DIVERGED_SWING_DEG,
     IDENT_COLUMNS,
     SS_ERROR_LIMIT,
+    SWING_EXCESS_MIN,
+    SWING_EXCESS_RATIO,
     metric_columns,
 )
 from swingrt.campaign.results import read_rows
@@ -157,7 +159,9 @@ def write_report(out: str | os.PathLike[str], spec: CampaignSpec, figures: bool 
         "A flight **fails** when the sample raised an error, the controller fell back to "
         "PX4 PID, it diverged (a NaN metric or a peak swing above "
         f"{DIVERGED_SWING_DEG:g}°), the velocity never settled within 5 % of the step, or "
-        f"the steady-state error is ≥ {SS_ERROR_LIMIT} m/s. Intervals: 95 % Wilson.",
+        f"the steady-state error is ≥ {SS_ERROR_LIMIT} m/s, or (LQR, MPC) the swing IAE's "
+        f"excess above its floor is ≥ {SWING_EXCESS_RATIO:g}× PID's in the same sample and "
+        f"≥ {SWING_EXCESS_MIN:g} deg·s. Intervals: 95 % Wilson.",
         "",
         "| controller | flights | failed | rate | 95 % CI | reasons |",
         "|---|---:|---:|---:|---|---|",

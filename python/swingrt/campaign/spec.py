@@ -234,11 +234,14 @@ def check_spec(spec: CampaignSpec, source: str = "spec", draws: int = CHECK_DRAW
         trials.append((f"sample {i}", spec.draw(i)))
     for what, values in trials:
         try:
-            spec.experiment(values, label=f"{source} ({what})")
+            spec.experiment(values, label=what)
         except ConfigError as exc:
+            msg = str(exc)
+            for prefix in (f"{what}: ", f"case {what}: "):
+                msg = msg.removeprefix(prefix)
             key = next((k for k in spec.vary if exc.field and exc.field.startswith(k)), None)
-            named = f" (vary.{key})" if key and key != exc.field else ""
-            raise ConfigError(f"{exc}{named}", field=exc.field) from None
+            where = f"vary.{key} at {what}" if key else what
+            raise ConfigError(f"{source}: {msg} ({where})", field=exc.field) from None
 
 
 def load_spec(path: str | os.PathLike[str]) -> CampaignSpec:
