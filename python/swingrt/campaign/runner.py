@@ -29,7 +29,7 @@ from swingrt.campaign.results import (
     write_batch,
 )
 from swingrt.campaign.spec import CampaignSpec
-from swingrt.errors import ConfigError
+from swingrt.errors import ConfigError, SimulationError
 
 #: Largest batch: past this, the scheduler's overhead (milliseconds per task) is already far
 #: below 5 % of a batch's work (a sample is ~0.3-3 s) and bigger batches only delay results.
@@ -148,10 +148,17 @@ def run_campaign(
             bar = Progress(len(todo), spec.name, progress)
             t0 = time.perf_counter()
             futures = client.map(fly_batch, [spec.raw] * len(batches), batches, key=keys)
+            first = {f.key: b[0] for f, b in zip(futures, batches, strict=True)}
             finished = 0
             try:
                 for fut in as_completed(futures):
-                    rows = fut.result()
+                    try:
+                        rows = fut.result()
+                    except Exception as exc:  # a worker died (KilledWorker), a lost scheduler
+                        raise SimulationError(
+                            f"batch from sample {first[fut.key]}: {type(exc).__name__}: {exc} "
+                            "(finished batches are kept; rerun to resume)"
+                        ) from None
                     write_batch(out, rows)
                     finished += len({r["sample"] for r in rows})
                     bar.update(finished)
