@@ -160,6 +160,16 @@ def test_same_seed_and_index_fly_the_same_row(tmp_path):
     assert a[0]["q"] is not None and a[0]["p"] is not None and a[0]["test_nmae"] > 0
 
 
+def test_a_sample_that_cannot_be_identified_is_a_row_not_a_crash():
+    raw = {"name": "e", "samples": 1, "base": {"duration": 8.0, "training_duration": 3.0}}
+    rows, _ = fly_sample(raw, 0)
+    by = {r["controller"]: r for r in rows}
+    assert by["pid"]["error"] == "" and math.isfinite(by["pid"]["peak_swing_deg"])
+    for c in ("lqr", "mpc"):
+        assert by[c]["failure"] == "error" and "DataError" in by[c]["error"]
+        assert math.isnan(by[c]["peak_swing_deg"]) and by[c]["q"] is None
+
+
 def test_failure_rule():
     ok = {
         "controller": "mpc",

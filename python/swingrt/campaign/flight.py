@@ -50,16 +50,33 @@ def metric_columns() -> tuple[str, ...]:
     return tuple(METRICS) + EXTRA_METRICS + (RATIO,)
 
 
+def _cell(v: Any) -> Any:
+    """One column value: numbers as float (so a grid of 0 and 0.5 is one column type),
+    booleans and strings as they are, anything else as its repr."""
+    if isinstance(v, (bool, str)) or v is None:
+        return v
+    if isinstance(v, (int, float)):
+        return float(v)
+    return repr(v)
+
+
 def param_columns(values: dict[str, Any]) -> dict[str, Any]:
-    """Flatten sampled values into columns: vectors ``key[i]``, strings and numbers as is."""
+    """Flatten sampled values into columns: vectors ``key[i]``, numbers as float, strings
+    and booleans as they are."""
     out: dict[str, Any] = {}
     for k, v in values.items():
         if isinstance(v, list):
             for i, x in enumerate(v):
-                out[f"{k}[{i}]"] = x
+                out[f"{k}[{i}]"] = _cell(x)
         else:
-            out[k] = v
+            out[k] = _cell(v)
     return out
+
+
+def _fatal(exc: BaseException) -> bool:
+    """Whether an exception must stop the campaign rather than become an error row (a Rust
+    panic surfaces as a BaseException and is a row)."""
+    return isinstance(exc, (KeyboardInterrupt, SystemExit, GeneratorExit, MemoryError))
 
 
 def failure_reason(row: dict[str, Any]) -> str:
@@ -109,39 +126,46 @@ def fly_sample(
     ident: dict[str, Any] = {c: None for c in IDENT_COLUMNS}
     nan_metrics = {m: math.nan for m in metric_columns()}
     traces: dict[str, Any] = {}
+    setup_error = ident_error = ""
+    model = lqr = None
     try:
         exp = spec.experiment(values, label=f"{spec.name} #{index}")
         axis = "ne" if exp.axes == "ne" else "n"
         train_sc = training_scenario(exp, {}, seed)
-        train = _run(train_sc, False, "collect")
-        plots = None if out is None else out / "error_vs_delays.png"
-        model, wb, lqr = identify_case(train, exp, plots)
-        cc = model.diagnostics.get("control_check")
-        ident = {
-            "q": int(model.delays),
-            "p": int(model.rank),
-            "test_nmae": float(model.diagnostics.get("test_nmae", math.nan)),
-            "control_check_passed": None if cc is None else bool(cc.get("passed", True)),
-            "wb_payload_mass": lqr["m_p"],
-            "wb_length": lqr["l"],
-        }
-        if out is not None:
-            train.to_parquet(out / "training.parquet")
-            model.save(out / "model.json")
-            wb.save(out / "whitebox.json")
         ev_sc = evaluation_scenario(exp, {}, seed + 1, train_sc)
-    except Exception as exc:  # noqa: BLE001 - a broken sample is a result, not a crash
-        err = f"{type(exc).__name__}: {exc}"
-        rows = [
-            {**common, "controller": c, **ident, "fallback": "", "error": err, **nan_metrics}
-            for c in spec.controllers
-        ]
-        for r in rows:
-            r["failure"] = failure_reason(r)
-        return rows, traces
+    except BaseException as exc:  # a broken sample is a result, not a crash
+        if _fatal(exc):
+            raise
+        setup_error = f"{type(exc).__name__}: {exc}"
+    if not setup_error:
+        try:
+            train = _run(train_sc, False, "collect")
+            plots = None if out is None else out / "error_vs_delays.png"
+            model, wb, lqr = identify_case(train, exp, plots)
+            cc = model.diagnostics.get("control_check")
+            ident = {
+                "q": int(model.delays),
+                "p": int(model.rank),
+                "test_nmae": float(model.diagnostics.get("test_nmae", math.nan)),
+                "control_check_passed": None if cc is None else bool(cc.get("passed", True)),
+                "wb_payload_mass": lqr["m_p"],
+                "wb_length": lqr["l"],
+            }
+            if out is not None:
+                train.to_parquet(out / "training.parquet")
+                model.save(out / "model.json")
+                wb.save(out / "whitebox.json")
+        except BaseException as exc:  # PID still flies without a model
+            if _fatal(exc):
+                raise
+            ident_error = f"{type(exc).__name__}: {exc}"
     rows = []
     for ctrl in spec.controllers:
         row: dict[str, Any] = {**common, "controller": ctrl, **ident, "fallback": "", "error": ""}
+        blocked = setup_error or (ident_error if ctrl != "pid" else "")
+        if blocked:
+            rows.append({**row, **nan_metrics, "error": blocked})
+            continue
         try:
             trace, extras = simulate_controller(
                 ev_sc,
@@ -166,7 +190,9 @@ def fly_sample(
             traces[ctrl] = trace
             if out is not None:
                 trace.to_parquet(out / f"{ctrl}.parquet")
-        except Exception as exc:  # noqa: BLE001 - as above
+        except BaseException as exc:  # as above
+            if _fatal(exc):
+                raise
             row.update(nan_metrics)
             row["error"] = f"{type(exc).__name__}: {exc}"
         rows.append(row)

@@ -137,7 +137,7 @@ def read_results(out: str | os.PathLike[str]) -> Any:
     if not files:
         return None
     tables = [pq.read_table(f) for f in files]
-    table = pa.concat_tables(tables, promote_options="default")
+    table = pa.concat_tables(tables, promote_options="permissive")
     return table.sort_by([("sample", "ascending"), ("controller", "ascending")])
 
 
