@@ -61,7 +61,8 @@ def main() -> int:
             results[n] = (rate, read_rows(out))
             print(
                 f"workers {n}: {s['flown']} samples in {s['seconds']:.1f} s = {rate:.3f} "
-                f"samples/s = {rate * per:.3f} flights/s (batch {s.get('batch')})",
+                f"samples/s = {rate * per:.3f} flights/s (batch {s.get('batch')}, workers "
+                f"busy {s.get('utilisation', 0.0):.0%})",
                 flush=True,
             )
         one = results[counts[0]]

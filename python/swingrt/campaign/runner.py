@@ -123,7 +123,9 @@ def run_campaign(
 ) -> dict[str, Any]:
     """Run (or resume) ``spec`` into ``out``; returns a summary: ``samples``, ``flown``
     (samples flown by this call), ``skipped`` (already finished), ``rows``, ``seconds``
-    (flying time of this call) and ``workers``."""
+    (wall time of this call's flying, cluster start excluded), ``workers``, ``batch``
+    (samples per task), ``busy`` (worker seconds spent flying) and ``utilisation`` (busy /
+    (seconds × workers): what scheduling, transfer and writing leave of the workers' time)."""
     out = Path(out)
     store_spec(spec, out, spec_text)
     clean_partial(out)
@@ -150,24 +152,32 @@ def run_campaign(
             futures = client.map(fly_batch, [spec.raw] * len(batches), batches, key=keys)
             first = {f.key: b[0] for f, b in zip(futures, batches, strict=True)}
             finished = 0
+            busy_total = 0.0
             try:
                 for fut in as_completed(futures):
                     try:
-                        rows = fut.result()
+                        rows, busy = fut.result()
                     except Exception as exc:  # a worker died (KilledWorker), a lost scheduler
                         raise SimulationError(
                             f"batch from sample {first[fut.key]}: {type(exc).__name__}: {exc} "
                             "(finished batches are kept; rerun to resume)"
                         ) from None
                     write_batch(out, rows)
+                    busy_total += busy
                     finished += len({r["sample"] for r in rows})
                     bar.update(finished)
             finally:
                 bar.close()
                 for f in futures:
                     f.cancel()
+            wall = time.perf_counter() - t0
             summary.update(
-                flown=finished, seconds=time.perf_counter() - t0, workers=n_workers, batch=size
+                flown=finished,
+                seconds=wall,
+                workers=n_workers,
+                batch=size,
+                busy=busy_total,
+                utilisation=busy_total / (wall * n_workers) if wall > 0 else 0.0,
             )
     summary["rows"] = len(read_rows(out))
     if report:

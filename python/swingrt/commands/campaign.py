@@ -107,6 +107,11 @@ def run(args) -> int:
     print(
         f"{spec.name}: {s['flown']} samples flown, {s['skipped']} already done, "
         f"{s['rows']} rows; {rate:.2f} samples/s on {s['workers']} worker(s)"
+        + (
+            f", batches of {s['batch']}, workers busy {s['utilisation']:.0%} of the time"
+            if s["flown"]
+            else ""
+        )
     )
     print(f"wrote {out}/" + ("" if args.no_report else " (report.md)"))
     return 0
