@@ -16,6 +16,8 @@ import time
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from swingrt.campaign import failure_reason, fly_sample, load_spec, parse_spec, read_rows
 from swingrt.campaign.report import wilson, worst_samples
@@ -138,6 +140,31 @@ def test_draws_depend_on_seed_and_index_alone(tmp_path):
         assert 0.05 <= v["payload.mass"] <= 0.5 and 0.3 <= v["payload.length"] <= 3.0
         assert len(v["wind.velocity"]) == 3 and v["wind.velocity"][2] == 0.0
         assert v["noise.swing_std"] == [0.0, 0.005][i % 2]
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    index=st.integers(0, 10**9),
+    low=st.floats(1e-3, 10.0),
+    span=st.floats(0.0, 100.0),
+)
+def test_draws_stay_in_their_bounds_and_repeat(seed, index, low, span):
+    vary = {
+        "u": parse_distribution({"dist": "uniform", "low": low, "high": low + span}, "vary.u"),
+        "l": parse_distribution(
+            {"dist": "loguniform", "low": [low, low], "high": [low + span] * 2}, "vary.l"
+        ),
+        "n": parse_distribution(
+            {"dist": "normal", "mean": 0.0, "std": span, "low": -low, "high": low}, "vary.n"
+        ),
+        "c": parse_distribution({"dist": "choice", "values": [1, 2], "weights": [0, 1]}, "vary.c"),
+    }
+    a = draw(vary, seed, index)
+    assert a == draw(vary, seed, index)
+    assert low <= a["u"] <= low + span
+    assert all(low * (1 - 1e-12) <= x <= (low + span) * (1 + 1e-12) for x in a["l"])
+    assert -low <= a["n"] <= low and a["c"] == 2
 
 
 def test_grid_is_a_full_product():
