@@ -158,7 +158,7 @@ def write_report(out: str | os.PathLike[str], spec: CampaignSpec, figures: bool 
         "",
         "A flight **fails** when the sample raised an error, the controller fell back to "
         "PX4 PID, it diverged (a NaN metric or a peak swing above "
-        f"{DIVERGED_SWING_DEG:g}°), the velocity never settled within 5 % of the step, or "
+        f"{DIVERGED_SWING_DEG:g}°), the velocity never settled within 5 % of the step, "
         f"the steady-state error is ≥ {SS_ERROR_LIMIT} m/s, or (LQR, MPC) the swing IAE's "
         f"excess above its floor is ≥ {SWING_EXCESS_RATIO:g}× PID's in the same sample and "
         f"≥ {SWING_EXCESS_MIN:g} deg·s. Intervals: 95 % Wilson.",
