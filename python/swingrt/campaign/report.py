@@ -87,10 +87,15 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
-def _plots(out: Path, rows: list[dict[str, Any]], ctrls: list[str], params: list[str]) -> list[str]:
+def _plots(
+    out: Path, rows: list[dict[str, Any]], ctrls: list[str], params: list[str], logs: set[str]
+) -> list[str]:
+    """Write the figures; ``logs``: the parameters drawn log-uniformly (log axis)."""
     from swingrt.reports.plots import _STYLE, _pyplot, save_figure
 
     plt = _pyplot()
+    from matplotlib.ticker import NullFormatter
+
     written = []
     metrics = list(metric_columns())
     ncol = 3
@@ -129,6 +134,9 @@ def _plots(out: Path, rows: list[dict[str, Any]], ctrls: list[str], params: list
                 color, label = _STYLE.get(c, (None, c))
                 ax.scatter(x, np.where(np.isfinite(y), y, np.nan), s=10, color=color, label=label)
             ax.set_xlabel(p)
+            if p.split("[")[0] in logs:
+                ax.set_xscale("log")
+                ax.xaxis.set_minor_formatter(NullFormatter())
             ax.set_ylabel(m)
             ax.grid(alpha=0.3)
         axes[0, 0].legend(fontsize=8)
@@ -201,7 +209,8 @@ def write_report(out: str | os.PathLike[str], spec: CampaignSpec, figures: bool 
             )
             cells.append(cell + (f" (∞ ×{inf})" if inf else ""))
         lines.append(f"| {m} | " + " | ".join(cells) + " |")
-    figs = _plots(out, rows, ctrls, params) if figures and rows else []
+    logs = {k for k, d in spec.vary.items() if d.kind == "loguniform"}
+    figs = _plots(out, rows, ctrls, params, logs) if figures and rows else []
     if figs:
         lines += ["", "## Figures", ""]
         lines += [f"![{f}]({f})" for f in figs]
