@@ -21,6 +21,7 @@ COMMANDS = (
     "identify",
     "evaluate",
     "experiment",
+    "campaign",
     "sitl",
     "fly",
     "bench",

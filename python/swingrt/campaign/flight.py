@@ -1,0 +1,216 @@
+"""One sample of a campaign, flown exactly as an experiment case is.
+
+Training flight under PX4 PID → identification (:func:`~swingrt.experiments.identify_case`)
+→ every controller on the evaluation step (:func:`~swingrt.experiments.simulate_controller`)
+→ :func:`~swingrt.metrics.step_metrics`. This module runs on the Dask workers: it takes the
+spec as plain data and returns plain rows.
+
+**Failure.** A flight fails when any of these holds (:func:`failure_reason`):
+
+- ``error``: the sample raised (identification or simulation error);
+- ``fallback``: the MPC or LQR handed over to PX4 PID during the flight;
+- ``diverged``: a metric is NaN, or the peak swing exceeds 60° (the simulator's payload
+  left the useful range);
+- ``v_not_settled``: the velocity never stayed within 5 % of the step (``v_settle_s`` = ∞);
+- ``ss_error``: the steady-state velocity error is >= 0.02 m/s;
+- ``swing``: (LQR, MPC, when PID is flown too) the swing IAE's excess above its floor
+  (:func:`~swingrt.metrics.swing_iae_floor`, what no controller can remove) is >= 0.4× PID's
+  excess in the same sample and >= 1 deg·s: the controller does not damp the swing.
+
+PX4 PID is flown as the reference; it is held to the rules but the last.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+from swingrt.metrics import METRICS, step_metrics, swing_iae_floor
+
+#: ss_error at or above which a flight fails [m/s].
+SS_ERROR_LIMIT = 0.02
+#: Peak swing above which a flight counts as diverged [deg].
+DIVERGED_SWING_DEG = 60.0
+#: Swing IAE excess, as a fraction of PID's, at or above which a flight fails.
+SWING_EXCESS_RATIO = 0.4
+#: ... unless the excess is below this [deg·s].
+SWING_EXCESS_MIN = 1.0
+
+#: Identification columns of a row.
+IDENT_COLUMNS = ("q", "p", "test_nmae", "control_check_passed", "wb_payload_mass", "wb_length")
+#: Columns added besides :data:`swingrt.metrics.METRICS` (the swing IAE's floor and excess).
+EXTRA_METRICS = tuple(c for c in ("swing_floor_deg_s", "swing_excess_deg_s") if c not in METRICS)
+#: The swing IAE excess over PID's in the same sample (NaN when PID is not flown).
+RATIO = "swing_excess_vs_pid"
+
+
+def metric_columns() -> tuple[str, ...]:
+    """Every metric column: ``metrics.csv``'s, then the floor and excess of the swing IAE."""
+    return tuple(METRICS) + EXTRA_METRICS + (RATIO,)
+
+
+def _cell(v: Any) -> Any:
+    """One column value: numbers as float (so a grid of 0 and 0.5 is one column type),
+    booleans and strings as they are, anything else as its repr."""
+    if isinstance(v, (bool, str)) or v is None:
+        return v
+    if isinstance(v, (int, float)):
+        return float(v)
+    return repr(v)
+
+
+def param_columns(values: dict[str, Any]) -> dict[str, Any]:
+    """Flatten sampled values into columns: vectors ``key[i]``, numbers as float, strings
+    and booleans as they are."""
+    out: dict[str, Any] = {}
+    for k, v in values.items():
+        if isinstance(v, list):
+            for i, x in enumerate(v):
+                out[f"{k}[{i}]"] = _cell(x)
+        else:
+            out[k] = _cell(v)
+    return out
+
+
+def _fatal(exc: BaseException) -> bool:
+    """Whether an exception must stop the campaign rather than become an error row (a Rust
+    panic surfaces as a BaseException and is a row)."""
+    return isinstance(exc, (KeyboardInterrupt, SystemExit, GeneratorExit, MemoryError))
+
+
+def failure_reason(row: dict[str, Any]) -> str:
+    """Why a row's flight failed ('' when it did not); see the module docs."""
+    if row.get("error"):
+        return "error"
+    if row.get("fallback"):
+        return "fallback"
+    vals = [row.get(m) for m in METRICS]
+    if any(isinstance(v, float) and math.isnan(v) for v in vals) or (
+        row.get("peak_swing_deg", 0.0) > DIVERGED_SWING_DEG
+    ):
+        return "diverged"
+    if math.isinf(row.get("v_settle_s", 0.0)):
+        return "v_not_settled"
+    if row.get("ss_error", 0.0) >= SS_ERROR_LIMIT:
+        return "ss_error"
+    ratio = row.get(RATIO, math.nan)
+    if (
+        row.get("controller") != "pid"
+        and ratio is not None
+        and ratio >= SWING_EXCESS_RATIO
+        and row.get("swing_excess_deg_s", 0.0) >= SWING_EXCESS_MIN
+    ):
+        return "swing"
+    return ""
+
+
+def fly_sample(
+    raw: dict[str, Any], index: int, out: Path | None = None
+) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """Fly sample ``index`` of the spec ``raw``; returns one row per controller and, with
+    ``out``, writes the traces, models and figures there (``--rerun``)."""
+    from swingrt.campaign.spec import parse_spec
+    from swingrt.experiments import (
+        evaluation_scenario,
+        identify_case,
+        simulate_controller,
+        training_scenario,
+    )
+    from swingrt.sim import _run
+
+    spec = parse_spec(raw)
+    values = spec.draw(index)
+    seed = spec.flight_seed(index)
+    common: dict[str, Any] = {"sample": index, "flight_seed": seed, **param_columns(values)}
+    ident: dict[str, Any] = {c: None for c in IDENT_COLUMNS}
+    nan_metrics = {m: math.nan for m in metric_columns()}
+    traces: dict[str, Any] = {}
+    setup_error = ident_error = ""
+    model = lqr = None
+    try:
+        exp = spec.experiment(values, label=f"{spec.name} #{index}")
+        axis = "ne" if exp.axes == "ne" else "n"
+        train_sc = training_scenario(exp, {}, seed)
+        ev_sc = evaluation_scenario(exp, {}, seed + 1, train_sc)
+    except BaseException as exc:  # a broken sample is a result, not a crash
+        if _fatal(exc):
+            raise
+        setup_error = f"{type(exc).__name__}: {exc}"
+    if not setup_error:
+        try:
+            train = _run(train_sc, False, "collect")
+            plots = None if out is None else out / "error_vs_delays.png"
+            model, wb, lqr = identify_case(train, exp, plots)
+            cc = model.diagnostics.get("control_check")
+            ident = {
+                "q": int(model.delays),
+                "p": int(model.rank),
+                "test_nmae": float(model.diagnostics.get("test_nmae", math.nan)),
+                "control_check_passed": None if cc is None else bool(cc.get("passed", True)),
+                "wb_payload_mass": lqr["m_p"],
+                "wb_length": lqr["l"],
+            }
+            if out is not None:
+                train.to_parquet(out / "training.parquet")
+                model.save(out / "model.json")
+                wb.save(out / "whitebox.json")
+        except BaseException as exc:  # PID still flies without a model
+            if _fatal(exc):
+                raise
+            ident_error = f"{type(exc).__name__}: {exc}"
+    rows = []
+    for ctrl in spec.controllers:
+        row: dict[str, Any] = {**common, "controller": ctrl, **ident, "fallback": "", "error": ""}
+        blocked = setup_error or (ident_error if ctrl != "pid" else "")
+        if blocked:
+            rows.append({**row, **nan_metrics, "error": blocked})
+            continue
+        try:
+            trace, extras = simulate_controller(
+                ev_sc,
+                ctrl,
+                axes=exp.axes,
+                model=model,
+                lqr_params=lqr,
+                mpc_settings=exp.mpc or None,
+                lqr_settings=exp.lqr or None,
+            )
+            m = step_metrics(trace, t0=exp.step["t"], axis=axis)
+            metrics = {c: float(m.get(c, math.nan)) for c in METRICS}
+            if EXTRA_METRICS:
+                floor = swing_iae_floor(trace, t0=exp.step["t"], axis=axis)
+                extra = {
+                    "swing_floor_deg_s": floor,
+                    "swing_excess_deg_s": metrics["swing_iae_deg_s"] - floor,
+                }
+                metrics.update({c: extra[c] for c in EXTRA_METRICS})
+            row.update(metrics)
+            row["fallback"] = str(extras.get("fallback") or "")
+            traces[ctrl] = trace
+            if out is not None:
+                trace.to_parquet(out / f"{ctrl}.parquet")
+        except BaseException as exc:  # as above
+            if _fatal(exc):
+                raise
+            row.update(nan_metrics)
+            row["error"] = f"{type(exc).__name__}: {exc}"
+        rows.append(row)
+    pid = next((r for r in rows if r["controller"] == "pid"), None)
+    for row in rows:
+        ref = math.nan if pid is None else pid.get("swing_excess_deg_s", math.nan)
+        row[RATIO] = row["swing_excess_deg_s"] / ref if ref and ref > 0 else math.nan
+        row["failure"] = failure_reason(row)
+    return rows, traces
+
+
+def fly_batch(raw: dict[str, Any], indices: list[int]) -> tuple[list[dict[str, Any]], float]:
+    """Fly the samples ``indices`` (one Dask task); the rows of all of them and the
+    seconds the worker spent on them (kept out of the rows, which must not vary)."""
+    import time
+
+    t0 = time.perf_counter()
+    rows: list[dict[str, Any]] = []
+    for i in indices:
+        rows.extend(fly_sample(raw, i)[0])
+    return rows, time.perf_counter() - t0

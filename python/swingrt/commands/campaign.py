@@ -1,0 +1,117 @@
+"""``swingrt campaign``: a Monte Carlo study on Dask (see :mod:`swingrt.campaign`)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    """Register the subcommand."""
+    p = sub.add_parser(
+        "campaign",
+        help="Monte Carlo study: sampled payloads, wind, noise, settings; on Dask",
+        description="Fly every sample of SPEC.toml (training flight, identification, each "
+        "controller on the step) on an embedded Dask cluster or an existing scheduler, into "
+        "a resumable Parquet dataset with a report. Rerunning the same command resumes.",
+    )
+    p.add_argument("spec", nargs="?", help="campaign spec (TOML)")
+    p.add_argument("--out", help="output folder (default: runs/campaign-<name>)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers", type=int, help="worker processes of the embedded cluster (default: cores)"
+    )
+    where.add_argument("--scheduler", metavar="ADDRESS", help="existing Dask scheduler (tcp://…)")
+    p.add_argument(
+        "--rerun",
+        nargs=2,
+        metavar=("DIR", "INDEX"),
+        help="replay sample INDEX of the campaign in DIR with its traces and figures",
+    )
+    p.add_argument("--no-report", action="store_true", help="skip writing report.md")
+    return p
+
+
+def _rerun(folder: str, index_text: str) -> int:
+    from swingrt.campaign.flight import fly_sample, metric_columns
+    from swingrt.campaign.results import read_rows, stored_spec
+    from swingrt.campaign.spec import parse_spec
+    from swingrt.errors import ConfigError
+    from swingrt.reports.plots import plot_case
+
+    try:
+        index = int(index_text)
+    except ValueError:
+        raise ConfigError(f"--rerun: INDEX must be an integer (got {index_text!r})") from None
+    raw = stored_spec(folder)
+    spec = parse_spec(raw, f"{folder}/campaign.json")
+    if not 0 <= index < spec.samples:
+        raise ConfigError(f"--rerun: INDEX must be in 0..{spec.samples - 1} (got {index})")
+    out = Path(folder) / "rerun" / f"sample-{index:06d}"
+    out.mkdir(parents=True, exist_ok=True)
+    rows, traces = fly_sample(raw, index, out)
+    exp_axes = spec.base.get("axes", "n")
+    if traces:
+        plot_case(out / "sample.png", f"{spec.name} sample {index}", traces, exp_axes)
+    from swingrt.reports.tables import csv_text
+
+    cols = list(rows[0])
+    (out / "rows.csv").write_text(csv_text(rows, cols), encoding="utf-8")
+    stored = {r["controller"]: r for r in read_rows(folder) if r["sample"] == index}
+    for r in rows:
+        print(
+            f"sample {index} {r['controller']:4s} "
+            + ", ".join(f"{m} {r[m]:.4g}" for m in metric_columns())
+            + (f"  FAIL ({r['failure']})" if r["failure"] else "")
+        )
+        old = stored.get(r["controller"])
+        if old is not None:
+            same = all(
+                (old.get(k) == v)
+                or (isinstance(v, float) and math.isnan(v) and math.isnan(old.get(k) or 0.0))
+                for k, v in r.items()
+            )
+            print(f"  {'matches' if same else 'DIFFERS FROM'} the dataset's row")
+    print(f"wrote {out}/")
+    return 0
+
+
+def run(args) -> int:
+    """Run the subcommand."""
+    from swingrt.errors import ConfigError
+
+    if args.rerun:
+        if args.spec:
+            raise ConfigError("--rerun DIR INDEX takes no SPEC (the folder holds it)")
+        return _rerun(*args.rerun)
+    if not args.spec:
+        raise ConfigError("campaign: give SPEC.toml (or --rerun DIR INDEX)")
+    if args.workers is not None and args.workers < 1:
+        raise ConfigError(f"--workers: must be >= 1 (got {args.workers})")
+    from swingrt.campaign.runner import run_campaign
+    from swingrt.campaign.spec import load_spec
+    from swingrt.scenario import read_text
+
+    spec = load_spec(args.spec)
+    out = args.out or f"runs/campaign-{spec.name}"
+    s = run_campaign(
+        spec,
+        out,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        spec_text=read_text(args.spec),
+        report=not args.no_report,
+    )
+    rate = s["flown"] / s["seconds"] if s["seconds"] > 0 else 0.0
+    print(
+        f"{spec.name}: {s['flown']} samples flown, {s['skipped']} already done, "
+        f"{s['rows']} rows; {rate:.2f} samples/s on {s['workers']} worker(s)"
+        + (
+            f", batches of {s['batch']}, workers busy {s['utilisation']:.0%} of the time"
+            if s["flown"]
+            else ""
+        )
+    )
+    print(f"wrote {out}/" + ("" if args.no_report else " (report.md)"))
+    return 0

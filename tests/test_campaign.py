@@ -1,0 +1,366 @@
+"""``swingrt campaign``: spec validation, reproducible sampling, resume, kill -9, the
+report, and a hand-started Dask scheduler giving the same rows as the local cluster.
+
+The studies are tiny (60 s training flights, 8 s steps, a few samples) so the file runs in
+about a minute; the CLI runs in subprocesses so Dask's processes never share pytest's.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from swingrt.campaign import failure_reason, fly_sample, load_spec, parse_spec, read_rows
+from swingrt.campaign.report import wilson, worst_samples
+from swingrt.campaign.sampling import draw, parse_distribution
+from swingrt.errors import ConfigError
+
+STUDY = """
+name = "tiny"
+samples = {samples}
+seed = 3
+controllers = ["pid", "lqr", "mpc"]
+{extra}
+[base]
+step = {{ t = 2.0, vn = 2.0 }}
+duration = 8.0
+training_duration = 60.0
+
+[vary]
+"payload.mass" = {{ dist = "uniform", low = 0.05, high = 0.5 }}
+"payload.length" = {{ dist = "loguniform", low = 0.3, high = 3.0 }}
+"payload.kind" = {{ dist = "choice", values = ["single", "double"], weights = [0.8, 0.2] }}
+"wind.velocity" = {{ dist = "normal", mean = [0, 0, 0], std = [1, 1, 0] }}
+"noise.swing_std" = {{ dist = "grid", values = [0.0, 0.005] }}
+"""
+
+
+def write_study(path: Path, samples: int = 4, extra: str = "") -> Path:
+    path.write_text(STUDY.format(samples=samples, extra=extra), encoding="utf-8")
+    return path
+
+
+def rows_equal(a: list[dict], b: list[dict]) -> bool:
+    """Row for row, NaN equal to NaN."""
+    if len(a) != len(b):
+        return False
+    for ra, rb in zip(a, b, strict=True):
+        if set(ra) != set(rb):
+            return False
+        for k, v in ra.items():
+            w = rb[k]
+            if isinstance(v, float) and isinstance(w, float) and math.isnan(v) and math.isnan(w):
+                continue
+            if v != w:
+                return False
+    return True
+
+
+def keys(rows: list[dict]) -> list[tuple[int, str]]:
+    return [(r["sample"], r["controller"]) for r in rows]
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """An uninterrupted 6-sample run on 2 local workers: (spec file, output folder)."""
+    d = tmp_path_factory.mktemp("campaign-ref")
+    spec = write_study(d / "study.toml", samples=6, extra="batch_size = 1")
+    out = d / "out"
+    r = subprocess.run(
+        [sys.executable, "-m", "swingrt", "campaign", spec, "--out", out, "--workers", "2"],
+        capture_output=True,
+        text=True,
+        timeout=180,
+    )
+    assert r.returncode == 0, r.stderr
+    return spec, out
+
+
+# --- spec validation -----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("extra", "vary", "named"),
+    [
+        ("colour = 1", "", "unknown key 'colour'"),
+        ("", '"payload.mas" = { dist = "uniform", low = 0.1, high = 0.2 }', "mas"),
+        ("", '"payload.mass" = { dist = "gaussian", mean = 0.2 }', "vary.payload.mass"),
+        ("", '"payload.mass" = { dist = "uniform", low = 0.5, high = 0.1 }', "low must not"),
+        ("", '"payload.mass" = { dist = "uniform", low = 0.1 }', "needs 'high'"),
+        ("", '"payload.mass" = { dist = "loguniform", low = 0.0, high = 1.0 }', "low > 0"),
+        ("", '"payload.kind" = { dist = "choice", values = ["single"], weights = [1, 2] }', "wei"),
+        ("", '"mpc.horizon_typo" = { dist = "fixed", value = 3 }', "horizon_typo"),
+        ("", '"payload.mass" = { dist = "uniform", low = -1.0, high = 0.2 }', "payload.mass"),
+    ],
+)
+def test_spec_errors_name_the_key(tmp_path, extra, vary, named):
+    text = f'name = "x"\nsamples = 2\n{extra}\n[base]\nduration = 8.0\n[vary]\n{vary}\n'
+    p = tmp_path / "bad.toml"
+    p.write_text(text, encoding="utf-8")
+    with pytest.raises(ConfigError) as err:
+        load_spec(p)
+    msg = str(err.value)
+    assert named in msg and "\n" not in msg
+
+
+def test_cli_bad_spec_one_line_exit_2_before_flying(cli, tmp_path):
+    p = tmp_path / "bad.toml"
+    p.write_text(
+        'name = "x"\nsamples = 2\n[vary]\n"payload.mass" = { dist = "gaussian" }\n',
+        encoding="utf-8",
+    )
+    r = cli("campaign", p, "--out", tmp_path / "out", "--workers", "1")
+    assert r.returncode == 2
+    assert r.stderr.count("\n") == 1 and "vary.payload.mass" in r.stderr
+    assert "unknown distribution 'gaussian'" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "out").exists()
+
+
+# --- sampling ------------------------------------------------------------------------------
+
+
+def test_draws_depend_on_seed_and_index_alone(tmp_path):
+    spec = load_spec(write_study(tmp_path / "s.toml", samples=50))
+    other = load_spec(write_study(tmp_path / "t.toml", samples=7))
+    assert spec.draw(5) == other.draw(5)
+    assert spec.draw(5) != spec.draw(6)
+    kinds = [spec.draw(i)["payload.kind"] for i in range(50)]
+    assert set(kinds) == {"single", "double"}
+    for i in range(50):
+        v = spec.draw(i)
+        assert 0.05 <= v["payload.mass"] <= 0.5 and 0.3 <= v["payload.length"] <= 3.0
+        assert len(v["wind.velocity"]) == 3 and v["wind.velocity"][2] == 0.0
+        assert v["noise.swing_std"] == [0.0, 0.005][i % 2]
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    index=st.integers(0, 10**9),
+    low=st.floats(1e-3, 10.0),
+    span=st.floats(0.0, 100.0),
+)
+def test_draws_stay_in_their_bounds_and_repeat(seed, index, low, span):
+    vary = {
+        "u": parse_distribution({"dist": "uniform", "low": low, "high": low + span}, "vary.u"),
+        "l": parse_distribution(
+            {"dist": "loguniform", "low": [low, low], "high": [low + span] * 2}, "vary.l"
+        ),
+        "n": parse_distribution(
+            {"dist": "normal", "mean": 0.0, "std": span, "low": -low, "high": low}, "vary.n"
+        ),
+        "c": parse_distribution({"dist": "choice", "values": [1, 2], "weights": [0, 1]}, "vary.c"),
+    }
+    a = draw(vary, seed, index)
+    assert a == draw(vary, seed, index)
+    assert low <= a["u"] <= low + span
+    assert all(low * (1 - 1e-12) <= x <= (low + span) * (1 + 1e-12) for x in a["l"])
+    assert -low <= a["n"] <= low and a["c"] == 2
+
+
+def test_grid_is_a_full_product():
+    vary = {
+        "a": parse_distribution({"dist": "grid", "values": [1, 2, 3]}, "vary.a"),
+        "b": parse_distribution({"dist": "grid", "values": ["x", "y"]}, "vary.b"),
+        "c": parse_distribution(0.5, "vary.c"),
+    }
+    pts = [(draw(vary, 0, i)["a"], draw(vary, 0, i)["b"]) for i in range(6)]
+    assert pts == [(1, "x"), (1, "y"), (2, "x"), (2, "y"), (3, "x"), (3, "y")]
+    assert draw(vary, 0, 4)["c"] == 0.5
+
+
+def test_same_seed_and_index_fly_the_same_row(tmp_path):
+    spec = load_spec(write_study(tmp_path / "s.toml"))
+    a, _ = fly_sample(spec.raw, 1)
+    b, _ = fly_sample(parse_spec(spec.raw).raw, 1)
+    assert rows_equal(a, b)
+    assert [r["controller"] for r in a] == ["pid", "lqr", "mpc"]
+    assert a[0]["q"] is not None and a[0]["p"] is not None and a[0]["test_nmae"] > 0
+
+
+def test_a_sample_that_cannot_be_identified_is_a_row_not_a_crash():
+    raw = {"name": "e", "samples": 1, "base": {"duration": 8.0, "training_duration": 3.0}}
+    rows, _ = fly_sample(raw, 0)
+    by = {r["controller"]: r for r in rows}
+    assert by["pid"]["error"] == "" and math.isfinite(by["pid"]["peak_swing_deg"])
+    for c in ("lqr", "mpc"):
+        assert by[c]["failure"] == "error" and "DataError" in by[c]["error"]
+        assert math.isnan(by[c]["peak_swing_deg"]) and by[c]["q"] is None
+
+
+def test_failure_rule():
+    ok = {
+        "controller": "mpc",
+        "error": "",
+        "fallback": "",
+        "peak_swing_deg": 10.0,
+        "v_settle_s": 3.0,
+        "ss_error": 0.01,
+        "swing_excess_deg_s": 0.5,
+        "swing_excess_vs_pid": 0.05,
+    }
+    assert failure_reason(ok) == ""
+    assert failure_reason({**ok, "fallback": "solver"}) == "fallback"
+    assert failure_reason({**ok, "v_settle_s": math.inf}) == "v_not_settled"
+    assert failure_reason({**ok, "ss_error": 0.02}) == "ss_error"
+    assert failure_reason({**ok, "peak_swing_deg": 80.0}) == "diverged"
+    assert failure_reason({**ok, "swing_excess_deg_s": 5.0, "swing_excess_vs_pid": 0.5}) == "swing"
+    assert failure_reason({**ok, "swing_excess_vs_pid": 0.5}) == ""  # excess below 1 deg·s
+    pid = {**ok, "controller": "pid", "swing_excess_deg_s": 5.0, "swing_excess_vs_pid": 1.0}
+    assert failure_reason(pid) == ""
+
+
+def test_wilson_interval():
+    lo, hi = wilson(0, 10)
+    assert lo == 0.0 and 0.25 < hi < 0.35
+    lo, hi = wilson(5, 10)
+    assert lo < 0.5 < hi and math.isclose(lo + hi, 1.0)
+
+
+# --- runs ----------------------------------------------------------------------------------
+
+
+def test_report_names_the_worst_samples(reference):
+    _, out = reference
+    rows = read_rows(out)
+    assert keys(rows) == [(s, c) for s in range(6) for c in ("lqr", "mpc", "pid")]
+    report = (out / "report.md").read_text(encoding="utf-8")
+    assert (out / "metrics.png").is_file() and (out / "vs_payload.length.png").is_file()
+    worst = worst_samples(rows)
+    assert f"swingrt campaign --rerun {out} {worst[0]['sample']}" in report
+    assert "Wilson" in report and "| mpc |" in report
+
+
+def test_resume_skips_finished_samples_and_never_duplicates(cli, reference, tmp_path):
+    spec, ref = reference
+    out = tmp_path / "out"
+    r = cli("campaign", spec, "--out", out, "--workers", "1")
+    assert r.returncode == 0, r.stderr
+    batches = sorted((out / "results").glob("batch-*.parquet"))
+    for f in batches[1::2]:
+        f.unlink()
+    r = cli("campaign", spec, "--out", out, "--workers", "1")
+    assert r.returncode == 0, r.stderr
+    assert f"{len(batches[1::2])} samples flown, {6 - len(batches[1::2])} already done" in r.stdout
+    assert rows_equal(read_rows(out), read_rows(ref))
+
+
+def test_kill_9_then_rerun_matches_an_uninterrupted_run(cli, reference, tmp_path):
+    spec, ref = reference
+    out = tmp_path / "out"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "swingrt", "campaign", spec, "--out", out, "--workers", "1"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    deadline = time.monotonic() + 120
+    try:
+        while time.monotonic() < deadline and proc.poll() is None:
+            if len(list((out / "results").glob("batch-*.parquet"))) >= 2:
+                break
+            time.sleep(0.02)
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    done = len(list((out / "results").glob("batch-*.parquet")))
+    assert 1 <= done < 6, "the run ended before it could be killed"
+    r = cli("campaign", spec, "--out", out, "--workers", "1")
+    assert r.returncode == 0, r.stderr
+    assert rows_equal(read_rows(out), read_rows(ref))
+    assert not list((out / "results").glob(".*"))
+
+
+def test_changed_spec_is_refused_with_the_difference(cli, reference, tmp_path):
+    spec, ref = reference
+    changed = tmp_path / "changed.toml"
+    changed.write_text(
+        spec.read_text(encoding="utf-8").replace("high = 0.5", "high = 0.6"), encoding="utf-8"
+    )
+    r = cli("campaign", changed, "--out", ref, "--workers", "1")
+    assert r.returncode == 2
+    assert "vary.payload.mass.high changed from 0.5 to 0.6" in r.stderr
+    assert r.stderr.count("\n") == 1
+
+
+def test_rerun_replays_one_sample_with_traces(cli, reference):
+    _, out = reference
+    r = cli("campaign", "--rerun", out, "3")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.count("matches the dataset's row") == 3
+    d = out / "rerun" / "sample-000003"
+    for f in ("training.parquet", "pid.parquet", "mpc.parquet", "sample.png", "model.json"):
+        assert (d / f).is_file()
+
+
+def test_hand_started_scheduler_gives_the_same_rows(cli, reference, tmp_path):
+    spec, ref = reference
+    sched_file = tmp_path / "scheduler.json"
+    bin_dir = Path(sys.executable).parent
+    procs = [
+        subprocess.Popen(
+            [
+                bin_dir / "dask",
+                "scheduler",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                "0",
+                "--no-dashboard",
+                "--scheduler-file",
+                sched_file,
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+        )
+    ]
+    try:
+        deadline = time.monotonic() + 30
+        while not sched_file.exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        import json
+
+        address = json.loads(sched_file.read_text(encoding="utf-8"))["address"]
+        for _ in range(2):
+            procs.append(
+                subprocess.Popen(
+                    [
+                        bin_dir / "dask",
+                        "worker",
+                        address,
+                        "--nthreads",
+                        "1",
+                        "--nworkers",
+                        "1",
+                        "--host",
+                        "127.0.0.1",
+                        "--no-dashboard",
+                    ],
+                    stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL,
+                    start_new_session=True,
+                )
+            )
+        out = tmp_path / "out"
+        r = cli("campaign", spec, "--out", out, "--scheduler", address, timeout=120)
+        assert r.returncode == 0, r.stderr
+        assert rows_equal(read_rows(out), read_rows(ref))
+    finally:
+        for p in reversed(procs):
+            os.killpg(p.pid, signal.SIGTERM)
+        for p in procs:
+            try:
+                p.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)
+                p.wait()
