@@ -118,6 +118,10 @@ def test_experiment_list_and_a_small_experiment(tmp_path, cli):
         "v_settle_s",
         "ss_error",
         "effort",
+        "swing_excess_iae_deg_s",
+        "residual_swing_deg",
+        "swing_free_s",
+        "acc_sp_tv",
     ]
     assert [(x["scenario"], x["controller"]) for x in rows] == [("l0.8", "pid"), ("l0.8", "mpc")]
     for f in ("l0.8__pid.parquet", "l0.8__mpc.parquet", "l0.8.png", "metrics.md"):

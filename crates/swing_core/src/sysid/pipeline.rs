@@ -72,8 +72,8 @@ pub fn fit(
     }
 }
 
-/// Score `model` on the held-out span, storing the NMAE in its diagnostics; a span too short
-/// for the rollout leaves the model unscored.
+/// Score `model` on the held-out span from the starts a search uses (`score_delays`), storing
+/// the NMAE in its diagnostics; a span too short for the rollout leaves the model unscored.
 pub fn score(
     model: &mut LinearModel,
     test: &Trajectory<'_>,
@@ -82,7 +82,12 @@ pub fn score(
     if test.len == 0 {
         return Ok(());
     }
-    match metrics::rollout_nmae(model, test, settings.rollout_samples(), settings.starts) {
+    let horizon = settings.rollout_samples();
+    let q = metrics::score_delays(test.len, model.delays, horizon, settings.score_delays);
+    let scored = metrics::start_points(test.len, q, horizon, settings.starts)
+        .and_then(|starts| metrics::Scorer::new(test.clone(), starts, horizon))
+        .and_then(|mut scorer| scorer.score_model(model));
+    match scored {
         Ok(nm) => {
             model.diagnostics.test_nmae = Some(nm.mean);
             Ok(())
@@ -127,6 +132,7 @@ pub fn candidate_row(c: &Candidate, states: &[String]) -> Value {
         "stable": c.stable,
         "spectral_radius": c.spectral_radius,
         "integrator_eigenvalue": c.verdict.as_ref().and_then(|v| v.integrator),
+        "stability_screen": c.verdict.as_ref().map(|v| v.to_json()),
     })
 }
 

@@ -277,11 +277,8 @@ fn search_plan(
         return Err(config("delays must be at least 1"));
     }
     let (n, m) = (train.n, train.m);
-    let q_score = q_max.max(
-        settings
-            .score_delays
-            .min(test.len.saturating_sub(settings.horizon)),
-    );
+    let q_score =
+        super::metrics::score_delays(test.len, q_max, settings.horizon, settings.score_delays);
     let starts = start_points(test.len, q_score, settings.horizon, settings.starts)?;
     let screen = settings.screen(train);
     let mut scorer = Scorer::new(test.clone(), starts, settings.horizon)?;
@@ -419,7 +416,7 @@ fn search_plan(
         model
             .diagnostics
             .extra
-            .insert("stability_screen".into(), v.to_json(&screen));
+            .insert("stability_screen".into(), v.to_json());
     }
     model.diagnostics.fit_nmae = Some(super::metrics::one_step_nmae(&model, train)?);
     Ok(SearchResult {

@@ -56,15 +56,19 @@ pub struct Verdict {
     pub integrator: Option<f64>,
     /// Spectral radius with the integrator deflated (= `spectral_radius` without one).
     pub deflated_radius: f64,
+    /// The screen's `tolerance`.
+    pub tolerance: f64,
+    /// The screen's `integrator_tolerance`.
+    pub integrator_tolerance: f64,
 }
 
 impl Verdict {
     /// The verdict as a diagnostics object.
-    pub fn to_json(&self, screen: &Screen) -> Value {
+    pub fn to_json(&self) -> Value {
         json!({
             "criterion": CRITERION,
-            "tolerance": screen.tolerance,
-            "integrator_tolerance": screen.integrator_tolerance,
+            "tolerance": self.tolerance,
+            "integrator_tolerance": self.integrator_tolerance,
             "spectral_radius": self.spectral_radius,
             "integrator_eigenvalue": self.integrator,
             "deflated_radius": self.deflated_radius,
@@ -83,6 +87,8 @@ impl Screen {
                 spectral_radius: 0.0,
                 integrator: None,
                 deflated_radius: 0.0,
+                tolerance: self.tolerance,
+                integrator_tolerance: self.integrator_tolerance,
             });
         }
         let fa = faer::Mat::<f64>::from_fn(k, k, |i, j| a[(i, j)]);
@@ -96,6 +102,8 @@ impl Screen {
             spectral_radius: rho,
             integrator: None,
             deflated_radius: rho,
+            tolerance: self.tolerance,
+            integrator_tolerance: self.integrator_tolerance,
         };
         if plain.stable || self.velocity.is_empty() {
             return Ok(plain);
@@ -127,6 +135,7 @@ impl Screen {
             spectral_radius: rho,
             integrator: Some(lambda),
             deflated_radius: deflated,
+            ..plain
         })
     }
 
