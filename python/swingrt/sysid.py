@@ -196,10 +196,17 @@ def _prepare(
 def search(
     data: Any, *, axes: str = "n", delays: Sequence[int] | None = None, **settings: Any
 ) -> SearchResult:
-    """Grid (``fine=None``) or coarse->fine search over (q, p); selects on the first
-    ``test_span`` seconds, trains on the rest (section 4.6.3). ``delays`` are the coarse
-    grid's q (default 2, 6, ..., 58), then unit steps within ``fine`` = (q radius, p
-    radius). Other keywords are identification settings (:func:`identify_settings`)."""
+    """Search (q, p) on the held-out first ``test_span`` seconds, training on the rest
+    (section 4.6.3). ``search_mode="refine"`` (default): the coarse grid's q (``delays``,
+    default 2, 6, ..., 78) with every rank up to ``dense_ranks`` and steps of ``rank_step``
+    above, then unit steps within ``fine`` = (q radius, p radius) around the best p of each
+    of the ``winners`` best q (``fine=None``: the coarse grid alone);
+    ``search_mode="exhaustive"``: every q of ``delays`` (default 2...``score_delays`` = 80)
+    and every p. Both score every candidate from the same rollout starts, so their NMAEs
+    compare. The stability screen (criterion in ``model.diagnostics['stability_screen']``)
+    bounds every eigenvalue by 1 + ``stability_tolerance`` except the velocity integrator's,
+    which may lie within 1 ± ``integrator_tolerance``. Other keywords are identification
+    settings (:func:`identify_settings`)."""
     if settings.get("method") == "whitebox":
         raise ConfigError("method: search applies to dmdc and havokc", field="method")
     grid = list(delays) if delays is not None else settings.get("search_delays")
@@ -216,7 +223,7 @@ def identify(data: Any, *, axes: str = "n", **settings: Any) -> LinearModel:
 
     ``method``: ``dmdc`` | ``havokc`` | ``whitebox``; ``axes``: ``n`` (``[vn, swing_n] <-
     acc_sp_n``) or ``ne``; ``offset``: ``none`` | ``mean`` | ``affine``. With ``search``
-    (DMDc/HAVOKc) q and p come from a coarse->fine search; otherwise ``delays`` (default
+    (DMDc/HAVOKc) q and p come from a search (:func:`search`); otherwise ``delays`` (default
     20) and ``rank`` (default full). The first ``test_span`` seconds are held out and the
     model's ``diagnostics['test_nmae']`` is its rollout NMAE there; ``test_span=0`` trains
     on everything. White-box: ``payload_mass`` from RLS on the ``thrust`` column unless

@@ -150,7 +150,7 @@ impl Default for IdentifySettings {
             search: false,
             select: SelectBy::Control,
             search_mode: SearchMode::Refine,
-            dense_ranks: 12,
+            dense_ranks: 20,
             winners: 4,
             score_delays: DEFAULT_SCORE_DELAYS,
             dt: DEFAULT_DT,
@@ -369,5 +369,23 @@ mod tests {
             ..IdentifySettings::default()
         };
         assert!(wb.search_settings().is_none());
+    }
+
+    #[test]
+    fn the_exhaustive_grid_and_the_new_search_fields() {
+        let s = IdentifySettings::from_json(r#"{"search_mode": "exhaustive"}"#).unwrap();
+        let g = s.exhaustive_grid();
+        assert_eq!(g.delays, (2..=80).collect::<Vec<_>>());
+        assert_eq!((g.rank_start, g.rank_step), (1, 1));
+        assert!(s.stability_criterion().contains("velocity integrator"));
+        for (json, field) in [
+            (r#"{"winners": 0}"#, "winners"),
+            (r#"{"score_delays": 0}"#, "score_delays"),
+            (r#"{"integrator_tolerance": -1.0}"#, "integrator_tolerance"),
+        ] {
+            assert_eq!(IdentifySettings::from_json(json).unwrap_err().field, field);
+        }
+        let e = IdentifySettings::from_json(r#"{"search_mode": "grid"}"#).unwrap_err();
+        assert!(e.to_string().contains("search_mode"), "{e}");
     }
 }
