@@ -118,6 +118,10 @@ def test_experiment_list_and_a_small_experiment(tmp_path, cli):
         "v_settle_s",
         "ss_error",
         "effort",
+        "swing_excess_iae_deg_s",
+        "residual_swing_deg",
+        "swing_free_s",
+        "acc_sp_tv",
     ]
     assert [(x["scenario"], x["controller"]) for x in rows] == [("l0.8", "pid"), ("l0.8", "mpc")]
     for f in ("l0.8__pid.parquet", "l0.8__mpc.parquet", "l0.8.png", "metrics.md"):
@@ -170,3 +174,14 @@ def test_a_typo_in_an_experiment_fails_before_anything_flies(tmp_path, cli):
     r = cli("experiment", tmp_path / "identify.toml")
     assert r.returncode == 2 and "identify.serch" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+
+
+def test_compare_mpc_lqr_names_the_better_controller_and_the_alike_metrics():
+    from swingrt.experiments.runner import COMPARED, compare_mpc_lqr
+
+    lqr = dict.fromkeys(COMPARED, 1.0)
+    mpc = {**lqr, "peak_swing_deg": 0.5, "acc_sp_tv": 3.0}
+    text = compare_mpc_lqr(mpc, lqr)
+    assert "peak_swing_deg MPC (0.5 MPC vs 1 LQR)" in text
+    assert "acc_sp_tv LQR (3 MPC vs 1 LQR)" in text
+    assert "alike (within 20%): swing_excess_iae_deg_s" in text

@@ -65,3 +65,106 @@ def test_main_job_writes_the_report(tmp_path, cli):
         assert (out / f).is_file(), f
     model = swingrt.LinearModel.load(out / "default-step__model.json")
     assert model.states == ["vn", "swing_n"] and model.inputs == ["acc_sp_n"]
+
+
+# ------------------------------------------------------------- real logs without thrust
+
+#: The columns a real flight export has (the thesis vehicle's CSV logs): no thrust.
+REAL_LOG_COLUMNS = (
+    "t", "vn", "ve", "vd", "swing_n", "swing_e",
+    "acc_sp_n", "acc_sp_e", "acc_sp_d", "vel_sp_n", "vel_sp_e", "vel_sp_d",
+)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def real_logs(tmp_path_factory):
+    """A simulated flight with noise, an IMU offset and wind, as a thrust-less CSV and a
+    ULog whose swing sensor reads 2·angle + 0.01 on its own topic field names."""
+    import numpy as np
+
+    from swingrt.io import write_columns
+    from swingrt.testing import write_ulog
+
+    d = tmp_path_factory.mktemp("real")
+    sc = {
+        "noise": {"swing_std": 0.004, "velocity_std": 0.01, "acc_sp_bias": [0.1, 0.0]},
+        "wind": {"velocity": [0.8, 0.0, 0.0]},
+    }
+    tr = swingrt.collect(sc, duration=150.0, seed=5)
+    cols = {k: np.asarray(tr[k]) for k in REAL_LOG_COLUMNS}
+    write_columns(cols, d / "flight.csv")
+    write_ulog(tr.columns, d / "flight.ulg", swing_scale=0.5, swing_offset=0.01)
+    return d
+
+
+def test_identify_search_works_on_a_log_without_thrust(real_logs, cli):
+    """The documented default on a thrust-less log: the closed-loop check flies a white-box
+    with the default payload mass and says so; a given mass is used and named."""
+    out = real_logs / "csv.json"
+    r = cli("identify", real_logs / "flight.csv", "--search", "-o", out)
+    assert r.returncode == 0, r.stderr
+    assert "default payload mass 0.2 kg, not estimated" in r.stdout
+    model = swingrt.LinearModel.load(out)
+    cc = model.diagnostics["control_check"]
+    assert cc["plant"].startswith("whitebox(default payload mass 0.2 kg, not estimated")
+    assert "no 'thrust' column" in cc["plant"] and "--payload-mass" in cc["plant"]
+    screen = model.diagnostics["stability_screen"]
+    assert "velocity integrator" in screen["criterion"] and screen["stable"] is True
+    r = cli("identify", real_logs / "flight.csv", "--search", "--payload-mass", "0.3", "-o", out)
+    assert r.returncode == 0, r.stderr
+    plant = swingrt.LinearModel.load(out).diagnostics["control_check"]["plant"]
+    assert plant.startswith("whitebox(payload mass 0.3 kg given")
+
+
+def test_identify_search_works_on_a_ulog_with_its_swing_calibration(real_logs, cli):
+    """A ULog's thrust is normalised (not newtons): the estimate fails, the check says why
+    and uses the default mass; the swing calibration comes from the CLI."""
+    out = real_logs / "ulg.json"
+    r = cli(
+        "identify", real_logs / "flight.ulg", "--search", "--ulog-swing-scale", "0.5",
+        "--ulog-swing-offset", "0.01", "--ulog-swing-fields", "x,y", "-o", out,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    d = swingrt.LinearModel.load(out).diagnostics
+    assert "thrust estimate failed" in d["control_check"]["plant"]
+    assert d["test_nmae"] < 0.05
+    # The calibration matters: read raw, the swing is 2x off and offset.
+    r = cli("identify", real_logs / "flight.ulg", "--ulog-swing-topic", "nope", "-o", out)
+    assert r.returncode == 2 and "nope" in r.stderr and "Traceback" not in r.stderr
+    r = cli("identify", real_logs / "flight.csv", "--ulog-swing-scale", "2", "-o", out)
+    assert r.returncode == 2 and ".ulg" in r.stderr
+
+
+def test_a_missing_identification_column_names_the_column_and_the_option(real_logs, cli):
+    import numpy as np
+
+    from swingrt.io import load_flight, write_columns
+
+    cols = dict(load_flight(real_logs / "flight.csv").columns)
+    del cols["swing_n"]
+    write_columns({k: np.asarray(v) for k, v in cols.items()}, real_logs / "noswing.csv")
+    r = cli("identify", real_logs / "noswing.csv", "--search", "-o", real_logs / "x.json")
+    assert r.returncode == 2, r.stderr
+    assert "'swing_n'" in r.stderr and "--ulog-swing-topic" in r.stderr
+
+
+def test_exhaustive_search_mode_and_a_shared_scoring(flights):
+    """The exhaustive search tries every (q, p) and scores on the same starts and training
+    rows as the default search, so a candidate scores the same in both tables."""
+    tr = swingrt.Trace.from_parquet(flights / "train.parquet")
+    common = dict(select="nmae", test_span=40.0)
+    default = swingrt.sysid.search(tr, **common)
+    ex = swingrt.sysid.search(tr, search_mode="exhaustive", search_delays=list(range(2, 31)))
+    sd, se = default.model.diagnostics["selected"], ex.model.diagnostics["selected"]
+    assert {(r["delays"], r["rank"]) for r in ex.table} >= {
+        (q, p) for q in range(2, 31) for p in range(1, 2 * q + 2)
+    }
+    same = [r for r in ex.table if (r["delays"], r["rank"]) == (sd["delays"], sd["rank"])]
+    if same:
+        assert same[0]["nmae"] == pytest.approx(sd["nmae"], rel=1e-9)
+    common_pairs = {(r["delays"], r["rank"]): r["nmae"] for r in default.table}
+    shared = [r for r in ex.table if (r["delays"], r["rank"]) in common_pairs]
+    assert len(shared) > 50
+    for r in shared:
+        assert r["nmae"] == pytest.approx(common_pairs[(r["delays"], r["rank"])], rel=1e-9)
+    assert se["nmae"] <= min(r["nmae"] for r in shared if r["stable"]) + 1e-12

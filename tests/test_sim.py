@@ -186,3 +186,56 @@ def test_config_error_carries_the_dotted_field():
     assert ConfigError("exp.toml: axes: must be 'n' or 'ne'").field == "axes"
     assert ConfigError("unknown experiment 'x'").field is None
     assert ConfigError("anything", field="mpc.horizon").field == "mpc.horizon"
+
+
+def _step_trace(t, swing, acc_n=None, acc_e=None):
+    z = np.zeros_like(t)
+    cols = dict(t=t, vn=np.where(t >= 2.0, 1.0, 0.0), ve=z, swing_n=swing, swing_e=z)
+    cols.update(acc_sp_n=z if acc_n is None else acc_n, acc_sp_e=z if acc_e is None else acc_e)
+    cols.update(vel_sp_n=np.where(t >= 2.0, 1.0, 0.0), vel_sp_e=z)
+    return swingrt.Trace(cols)
+
+
+def test_residual_swing_and_swing_free_time_of_a_decaying_oscillation():
+    """swing = A e^{−s/τ} cos(ω s) after the step (s = t − 2): with a peak at s = 4 exactly
+    the residual is A e^{−4/τ}; the last time |swing| ≥ 0.25° lies within half a period
+    before τ ln(A / 0.25°) (the envelope's crossing)."""
+    a, tau, period = 6.0, 3.0, 1.0  # deg, s, s (s = 4 is a peak: 4 / period is whole)
+    t = np.arange(0.0, 40.0001, 0.001)
+    s = np.clip(t - 2.0, 0.0, None)
+    swing = np.where(t >= 2.0, np.radians(a * np.exp(-s / tau) * np.cos(2 * np.pi * s / period)), 0)
+    m = swingrt.step_metrics(_step_trace(t, swing), t0=2.0)
+    assert m["residual_swing_deg"] == pytest.approx(a * math.exp(-4.0 / tau), rel=1e-6)
+    crossing = tau * math.log(a / 0.25)
+    assert crossing - period / 2 - 0.002 <= m["swing_free_s"] <= crossing + 0.002
+    # The 1° band of swing_settle_s is reached earlier: the envelope crosses it at τ ln(A).
+    assert m["swing_settle_s"] <= tau * math.log(a) + 0.002 < m["swing_free_s"]
+    # Swing of both signs: the IAE is above the momentum floor, the excess is the rest.
+    from swingrt.metrics import swing_iae_floor
+
+    floor = swing_iae_floor(_step_trace(t, swing), t0=2.0)
+    assert m["swing_excess_iae_deg_s"] == pytest.approx(m["swing_iae_deg_s"] - floor)
+    assert m["swing_excess_iae_deg_s"] > 0.5 * m["swing_iae_deg_s"]
+
+
+def test_a_one_signed_swing_has_no_excess_above_the_floor():
+    t = np.arange(0.0, 12.0001, 0.01)
+    bump = np.where((t >= 2.0) & (t < 3.0), -np.radians(5.0) * np.sin(np.pi * (t - 2.0)), 0.0)
+    m = swingrt.step_metrics(_step_trace(t, bump), t0=2.0)
+    assert abs(m["swing_excess_iae_deg_s"]) < 1e-9
+    assert m["residual_swing_deg"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_acc_sp_tv_of_a_staircase():
+    """North 0 → 1 → −0.5 → 0.5, East 0 → 0.3 after the step, and a jump before it that
+    does not count: TV = 1 + 1.5 + 1 + 0.3 = 3.8 m/s²."""
+    from swingrt.metrics import acc_sp_tv
+
+    t = np.arange(0.0, 12.0001, 0.01)
+    an = np.select([t < 1.0, t < 3.0, t < 5.0, t < 7.0], [2.0, 0.0, 1.0, -0.5], 0.5)
+    ae = np.where(t >= 8.0, 0.3, 0.0)
+    m = swingrt.step_metrics(_step_trace(t, np.zeros_like(t), an, ae), t0=2.0)
+    assert m["acc_sp_tv"] == pytest.approx(3.8, rel=1e-12)
+    # A simultaneous (N, E) change counts as one vector step.
+    assert acc_sp_tv([0.0, 0.3], [0.0, 0.4]) == pytest.approx(0.5)
+    assert acc_sp_tv([1.0]) == 0.0

@@ -10,9 +10,21 @@ the step direction), over the window after the step:
   step (the core's ``step_overshoot``, the definition the closed-loop step check uses too);
 - ``v_settle_s``: time after ``t0`` from which |v − v_sp| < 5 % of the step for good [s];
 - ``ss_error``: |v_sp − mean v over the last 2 s| [m/s];
-- ``effort``: ∫ |a_sp|² dt of the horizontal acceleration setpoint [m²/s³].
+- ``effort``: ∫ |a_sp|² dt of the horizontal acceleration setpoint [m²/s³];
+- ``swing_excess_iae_deg_s``: ``swing_iae_deg_s`` − :func:`swing_iae_floor` [deg·s]: the part
+  of the swing IAE a controller decides (see below);
+- ``residual_swing_deg``: largest |swing − final| from 4 s after ``t0`` to the end [deg]: the
+  swing left once the velocity transient is over;
+- ``swing_free_s``: time after ``t0`` from which |swing − final| < 0.25° for good [s] — the
+  start of swing-free cruise. It is ``swing_settle_s`` with a band four times narrower: 1°
+  is inside the swing that any velocity change needs, so ``swing_settle_s`` ranks every good
+  controller alike; 0.25° is what a slowly decaying residual oscillation still exceeds;
+- ``acc_sp_tv``: total variation Σ|Δa_sp| of the horizontal acceleration setpoint (vector
+  norm of each tick's change) from ``t0`` to the end [m/s²]: command chatter, which the
+  swing metrics do not see and the attitude loop and motors do.
 
-"final" is the mean over the last 2 s of the window.
+"final" is the mean over the last 2 s of the window. The swing is the true swing when the
+trace logs it (``swing_true_*``), else the measured one.
 
 :func:`swing_iae_floor` gives the part of the swing IAE that no controller can remove:
 horizontally the cable is all that accelerates the payload, so g·∫tan(swing) dt equals the
@@ -39,7 +51,16 @@ METRICS = (
     "v_settle_s",
     "ss_error",
     "effort",
+    "swing_excess_iae_deg_s",
+    "residual_swing_deg",
+    "swing_free_s",
+    "acc_sp_tv",
 )
+
+#: Band of ``swing_free_s`` [deg].
+SWING_FREE_BAND_DEG = 0.25
+#: Start of the ``residual_swing_deg`` window after the step [s].
+RESIDUAL_AFTER_S = 4.0
 
 
 def _col(trace, name: str) -> np.ndarray:
@@ -110,15 +131,35 @@ def step_metrics(
     step = va - vb
     overshoot = 100.0 * _core.step_overshoot(np.ascontiguousarray(vw, dtype=float), vb, va)
     a2 = an[win] ** 2 + ae[win] ** 2
+    dev = np.degrees(sw - final_swing)
+    late = tw >= t0 + RESIDUAL_AFTER_S
+    iae = float(np.sum(np.abs(dev)) * dt)
+    floor = swing_iae_floor(trace, t0=t0, axis=axis, t_end=t_end)
     return {
         "peak_swing_deg": float(np.degrees(np.max(np.abs(sw)))),
         "swing_settle_s": _settle(tw, np.degrees(sw - final_swing), 1.0, t0),
-        "swing_iae_deg_s": float(np.degrees(np.sum(np.abs(sw - final_swing)) * dt)),
+        "swing_iae_deg_s": iae,
         "overshoot_pct": float(max(overshoot, 0.0)),
         "v_settle_s": _settle(tw, vw - va, 0.05 * abs(step) if step else 0.02, t0),
         "ss_error": float(abs(va - np.mean(vw[tail]))),
         "effort": float(np.sum(a2) * dt),
+        "swing_excess_iae_deg_s": iae - floor,
+        "residual_swing_deg": float(np.max(np.abs(dev[late]))) if late.any() else math.nan,
+        "swing_free_s": _settle(tw, dev, SWING_FREE_BAND_DEG, t0),
+        "acc_sp_tv": acc_sp_tv(an[win], ae[win]),
     }
+
+
+def acc_sp_tv(acc_n, acc_e=None) -> float:
+    """Total variation Σ_k |a_{k+1} − a_k| [m/s²] of an acceleration setpoint sequence (the
+    horizontal vector (N, E) when ``acc_e`` is given; NaN samples are skipped)."""
+    an = np.asarray(acc_n, dtype=float)
+    ae = np.zeros_like(an) if acc_e is None else np.asarray(acc_e, dtype=float)
+    ok = np.isfinite(an) & np.isfinite(ae)
+    an, ae = an[ok], ae[ok]
+    if len(an) < 2:
+        return 0.0
+    return float(np.sum(np.hypot(np.diff(an), np.diff(ae))))
 
 
 def swing_iae_floor(trace, *, t0: float, axis: str = "n", t_end: float | None = None) -> float:

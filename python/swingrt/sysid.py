@@ -32,6 +32,7 @@ from swingrt.errors import ConfigError, DataError, IdentificationError
 
 __all__ = [
     "AXES",
+    "DEFAULT_CHECK_PAYLOAD_MASS",
     "LinearModel",
     "SearchResult",
     "estimate_payload_mass",
@@ -40,6 +41,7 @@ __all__ = [
     "identify_settings",
     "resample",
     "search",
+    "check_plant",
     "select_for_control",
     "sweep_noise",
     "sweep_sample_time",
@@ -52,6 +54,11 @@ AXES: dict[str, tuple[list[str], list[str]]] = {
     "n": (["vn", "swing_n"], ["acc_sp_n"]),
     "ne": (["vn", "ve", "swing_n", "swing_e"], ["acc_sp_n", "acc_sp_e"]),
 }
+
+#: Payload mass [kg] the closed-loop check's white-box plant assumes when neither
+#: ``payload_mass`` is given nor the log has a usable ``thrust`` column: the thesis's payload
+#: (table 6.1) and the simulator's default.
+DEFAULT_CHECK_PAYLOAD_MASS = 0.2
 
 #: A discrete linear model over delay coordinates (``swingrt-model/1``), a core object:
 #: ``A``, ``B``, ``c`` (read-only numpy), ``dt``, ``delays``, ``rank``, ``states``,
@@ -157,7 +164,22 @@ def _prepare(
 ) -> tuple[np.ndarray, np.ndarray, list[str], list[str]]:
     """Resampled (and, with ``smooth``, smoothed) state and input columns of ``axes``."""
     states, inputs = _axes(axes)
-    cols = resample(_columns(data), settings["dt"], names=[*states, *inputs])
+    given = _columns(data)
+    missing = [c for c in (*states, *inputs) if c not in given]
+    if missing:
+        hint = []
+        if any(c.startswith("swing_") for c in missing):
+            hint.append(
+                "a ULog's swing sensor is chosen with --ulog-swing-topic/--ulog-swing-name "
+                "(Python: load_flight(ulog_swing=...))"
+            )
+        if axes == "ne" and not any(c.startswith("swing_") for c in missing):
+            hint.append("--axes n identifies the North axis alone")
+        raise DataError(
+            f"the flight has no column(s) {', '.join(repr(c) for c in missing)} that "
+            f"identification on axes {axes!r} needs" + (f"; {'; '.join(hint)}" if hint else "")
+        )
+    cols = resample(given, settings["dt"], names=[*states, *inputs])
     x = np.column_stack([cols[s] for s in states])
     u = np.column_stack([cols[s] for s in inputs])
     if settings["smooth"]:
@@ -174,10 +196,17 @@ def _prepare(
 def search(
     data: Any, *, axes: str = "n", delays: Sequence[int] | None = None, **settings: Any
 ) -> SearchResult:
-    """Grid (``fine=None``) or coarse->fine search over (q, p); selects on the first
-    ``test_span`` seconds, trains on the rest (section 4.6.3). ``delays`` are the coarse
-    grid's q (default 2, 6, ..., 58), then unit steps within ``fine`` = (q radius, p
-    radius). Other keywords are identification settings (:func:`identify_settings`)."""
+    """Search (q, p) on the held-out first ``test_span`` seconds, training on the rest
+    (section 4.6.3). ``search_mode="refine"`` (default): the coarse grid's q (``delays``,
+    default 2, 6, ..., 78) with every rank up to ``dense_ranks`` and steps of ``rank_step``
+    above, then unit steps within ``fine`` = (q radius, p radius) around the best p of each
+    of the ``winners`` best q (``fine=None``: the coarse grid alone);
+    ``search_mode="exhaustive"``: every q of ``delays`` (default 2...``score_delays`` = 80)
+    and every p. Both score every candidate from the same rollout starts, so their NMAEs
+    compare. The stability screen (criterion in ``model.diagnostics['stability_screen']``)
+    bounds every eigenvalue by 1 + ``stability_tolerance`` except the velocity integrator's,
+    which may lie within 1 ± ``integrator_tolerance``. Other keywords are identification
+    settings (:func:`identify_settings`)."""
     if settings.get("method") == "whitebox":
         raise ConfigError("method: search applies to dmdc and havokc", field="method")
     grid = list(delays) if delays is not None else settings.get("search_delays")
@@ -194,7 +223,7 @@ def identify(data: Any, *, axes: str = "n", **settings: Any) -> LinearModel:
 
     ``method``: ``dmdc`` | ``havokc`` | ``whitebox``; ``axes``: ``n`` (``[vn, swing_n] <-
     acc_sp_n``) or ``ne``; ``offset``: ``none`` | ``mean`` | ``affine``. With ``search``
-    (DMDc/HAVOKc) q and p come from a coarse->fine search; otherwise ``delays`` (default
+    (DMDc/HAVOKc) q and p come from a search (:func:`search`); otherwise ``delays`` (default
     20) and ``rank`` (default full). The first ``test_span`` seconds are held out and the
     model's ``diagnostics['test_nmae']`` is its rollout NMAE there; ``test_span=0`` trains
     on everything. White-box: ``payload_mass`` from RLS on the ``thrust`` column unless
@@ -237,19 +266,79 @@ def select_for_control(
     if result.search is None:
         raise ConfigError("result: not from a search (no candidates to check)", field="result")
     s = identify_settings(**{**result.settings, **settings})
-    plant = identify(data, axes=axes, method="whitebox", dt=s["dt"], vehicle_mass=s["vehicle_mass"])
+    plant, label = check_plant(data, result, axes=axes, settings=s)
     selection = {
         "candidates": candidates,
         "input_lags": list(input_lags),
         "vehicle_drag": list(vehicle_drag),
         "step": step,
         "bounds": dict(bounds or {}),
+        "plant_label": label,
     }
     x, u, states, inputs = _prepare(data, axes, s)
     model, _passed = _core.select_for_control(
         x, u, states, inputs, s, result.search, plant, mpc_settings, selection
     )
     return SearchResult(model=model, table=result.table, search=result.search, settings=s)
+
+
+def check_plant(
+    data: Any, result: SearchResult, *, axes: str = "n", settings: Mapping[str, Any]
+) -> tuple[LinearModel, str]:
+    """The plant the closed-loop check flies, and a label saying what it is.
+
+    The white-box of the same flight: cable length from the swing's FFT peak (or
+    ``cable_length``), payload mass from ``payload_mass`` if given, else RLS on a ``thrust``
+    column [N], else :data:`DEFAULT_CHECK_PAYLOAD_MASS` (not estimated; the label says so).
+    If no white-box can be built (no swing peak in the band …), the search's lowest-NMAE
+    model stands in as the plant (a model-only check; the label says why)."""
+    s = settings
+    cols = _columns(data)
+    length = (
+        f"cable length {s['cable_length']:.3g} m given"
+        if s["cable_length"] is not None
+        else "cable length from the swing FFT"
+    )
+    if s["payload_mass"] is not None:
+        mass = float(s["payload_mass"])
+        source = f"payload mass {mass:.3g} kg given"
+    else:
+        why = None
+        if "thrust" in cols:
+            try:
+                mass = estimate_payload_mass(
+                    data, vehicle_mass=s["vehicle_mass"], skip=s["test_span"]
+                )
+                source = f"payload mass {mass:.3g} kg from thrust"
+            except (DataError, IdentificationError) as exc:
+                why = f"the thrust estimate failed ({exc})"
+        else:
+            why = "the log has no 'thrust' column"
+        if why is not None:
+            mass = DEFAULT_CHECK_PAYLOAD_MASS
+            source = (
+                f"default payload mass {mass:.3g} kg, not estimated: {why}; "
+                "--payload-mass / payload_mass sets it"
+            )
+    try:
+        plant = identify(
+            data,
+            axes=axes,
+            method="whitebox",
+            dt=s["dt"],
+            test_span=s["test_span"],
+            vehicle_mass=s["vehicle_mass"],
+            payload_mass=mass,
+            cable_length=s["cable_length"],
+            swing_band=s["swing_band"],
+        )
+    except (DataError, IdentificationError) as exc:
+        best = result.model
+        return best, (
+            f"model(the search's best, q = {best.delays}, p = {best.rank}; model-only check, "
+            f"no white-box: {exc})"
+        )
+    return plant, f"whitebox({source}; {length})"
 
 
 def estimate_payload_mass(
@@ -261,7 +350,8 @@ def estimate_payload_mass(
     cols = _columns(data)
     if "thrust" not in cols:
         raise DataError(
-            "the white-box needs a 'thrust' column for the payload-mass estimate, or payload_mass"
+            "the white-box needs a 'thrust' column [N] for the payload-mass estimate; "
+            "give the mass instead (--payload-mass KG, or payload_mass=)"
         )
     if vehicle_mass is None:
         vehicle_mass = identify_settings()["vehicle_mass"]

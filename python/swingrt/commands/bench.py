@@ -41,7 +41,7 @@ def _timeit(fn, repeat: int) -> list[float]:
 def sysid(quick: bool) -> dict:
     """One DMDc fit (q = 50, 120 s at 0.03 s, one axis) and the reference grid (q = 2…60
     step 2 × p = 5…full rank step 5 with the affine column, 10 rollouts of 20 s), on a
-    simulated flight, plus the default coarse→fine search of ``identify --search``."""
+    simulated flight, plus the default search of ``identify --search``."""
     import numpy as np
 
     from swingrt import _core

@@ -20,7 +20,13 @@ def add_parser(sub) -> argparse.ArgumentParser:
     )
     p.add_argument("data", metavar="DATA", help="flight log (.parquet, .csv, .ulg)")
     p.add_argument("--method", choices=("dmdc", "havokc", "whitebox"), help="method (default dmdc)")
-    p.add_argument("--search", action="store_true", help="coarse→fine search over q and p")
+    p.add_argument("--search", action="store_true", help="search q and p on the held-out span")
+    p.add_argument(
+        "--search-mode",
+        choices=("refine", "exhaustive"),
+        help="with --search: 'refine' (default: coarse grid with every low rank, then unit "
+        "steps around several winners) or 'exhaustive' (every q = 2…80 and every p; slow)",
+    )
     p.add_argument(
         "--select",
         choices=("control", "nmae"),
@@ -52,6 +58,22 @@ def add_parser(sub) -> argparse.ArgumentParser:
         metavar="M",
         help="white-box cable length (default: from the swing's FFT peak)",
     )
+    g = p.add_argument_group(
+        "ULog swing sensor",
+        "where a PX4 .ulg holds the swing angles, and their linear calibration "
+        "(angle = scale · raw + offset); default: debug_vect rows named SWING, x = north, y = east",
+    )
+    g.add_argument("--ulog-swing-topic", metavar="TOPIC", help="uORB topic (default debug_vect)")
+    g.add_argument(
+        "--ulog-swing-name", metavar="NAME", help="debug_vect row name to keep (default SWING)"
+    )
+    g.add_argument(
+        "--ulog-swing-fields",
+        metavar="N,E",
+        help="fields holding the north and east swing (default x,y)",
+    )
+    g.add_argument("--ulog-swing-scale", type=float, metavar="S", help="rad per raw unit (1)")
+    g.add_argument("--ulog-swing-offset", type=float, metavar="RAD", help="offset [rad] (0)")
     p.add_argument("--plots", metavar="DIR", help="write diagnostic plots into DIR")
     p.add_argument(
         "--sweep",
@@ -76,6 +98,7 @@ def run(args) -> int:
         test_span=args.test_span,
         smooth=args.smooth,
         search=args.search,
+        search_mode=args.search_mode,
         select=args.select,
         delays=args.delays,
         rank=args.rank,
@@ -85,7 +108,7 @@ def run(args) -> int:
     )
     with options_named():
         checked = sysid.identify_settings(**settings)
-    data = load_flight(args.data)
+    data = load_flight(args.data, ulog_swing=_ulog_swing(args))
     result = None
     if args.search:
         search_opts = {k: v for k, v in checked.items() if k not in ("delays", "rank")}
@@ -95,6 +118,7 @@ def run(args) -> int:
             cc = result.model.diagnostics["control_check"]
             verdict = "passed" if cc["passed"] else "no candidate passed; least violating kept"
             print(f"closed-loop check: {verdict} ({len(cc['checked'])} candidate(s) flown)")
+            print(f"  checked on: {cc['plant']}")
         model = result.model
     else:
         model = sysid.identify(data, axes=args.axes, **checked)
@@ -115,6 +139,31 @@ def run(args) -> int:
         _sweep(args, data, checked)
     print(f"wrote {args.output}")
     return 0
+
+
+def _ulog_swing(args) -> dict | None:
+    """The ``ulog_swing`` mapping of the --ulog-swing-* options, or None (the default)."""
+    out: dict = {}
+    if args.ulog_swing_topic is not None:
+        out["topic"] = args.ulog_swing_topic
+    if args.ulog_swing_name is not None:
+        out["name"] = args.ulog_swing_name
+    if args.ulog_swing_fields is not None:
+        parts = [f.strip() for f in args.ulog_swing_fields.split(",")]
+        if len(parts) != 2 or not all(parts):
+            raise ConfigError(
+                f"--ulog-swing-fields: expected N,E (two field names), not "
+                f"{args.ulog_swing_fields!r}",
+                field="ulog_swing_fields",
+            )
+        out["n"], out["e"] = parts
+    if args.ulog_swing_scale is not None:
+        out["scale"] = args.ulog_swing_scale
+    if args.ulog_swing_offset is not None:
+        out["offset"] = args.ulog_swing_offset
+    if out and not args.data.lower().endswith(".ulg"):
+        raise ConfigError("--ulog-swing-*: apply to a .ulg log only", field="ulog_swing")
+    return out or None
 
 
 def _sweep(args, data, common) -> None:

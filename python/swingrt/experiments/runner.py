@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import copy
 import itertools
+import math
 import os
 import sys
 import time
@@ -339,15 +340,15 @@ def run_experiment(
             c: swing_iae_floor(tr, t0=exp.step["t"], axis="ne" if exp.axes == "ne" else "n")
             for c, tr in traces.items()
         }
-        iae = {r["controller"]: r["swing_iae_deg_s"] for r in rows if r["scenario"] == case}
         notes.append(
             f"{case}: swing IAE floor |∫(swing − final) dt| (the payload's Δv/g and drag, "
-            "any controller) "
+            "any controller; swing_excess_iae_deg_s is the IAE above it) "
             + ", ".join(f"{c} {floors[c]:.2f}" for c in traces)
-            + " deg·s; excess above it "
-            + ", ".join(f"{c} {iae[c] - floors[c]:.2f}" for c in traces)
             + " deg·s"
         )
+        case_rows = {r["controller"]: r for r in rows if r["scenario"] == case}
+        if "lqr" in case_rows and "mpc" in case_rows:
+            notes.append(f"{case}: {compare_mpc_lqr(case_rows['mpc'], case_rows['lqr'])}")
         cc = model.diagnostics.get("control_check")
         if cc is not None and not cc.get("passed", True):
             notes.append(
@@ -366,3 +367,32 @@ def run_experiment(
     write_metrics(out, exp, rows, notes)
     log(f"{exp.name}: wrote {out}")
     return rows
+
+
+#: Metrics :func:`compare_mpc_lqr` reads (lower is better for each).
+COMPARED = (
+    "peak_swing_deg",
+    "swing_excess_iae_deg_s",
+    "residual_swing_deg",
+    "swing_free_s",
+    "v_settle_s",
+    "ss_error",
+    "acc_sp_tv",
+)
+
+
+def compare_mpc_lqr(mpc: dict[str, Any], lqr: dict[str, Any], *, alike: float = 0.2) -> str:
+    """Where the MPC and the LQR differ on one case: each metric of :data:`COMPARED` whose
+    values differ by more than ``alike`` (relative, and more than 0.05 absolute) is named
+    with the better controller; the rest are listed as alike."""
+    better: list[str] = []
+    same: list[str] = []
+    for k in COMPARED:
+        a, b = float(mpc[k]), float(lqr[k])
+        if math.isclose(a, b, rel_tol=alike, abs_tol=0.05):
+            same.append(k)
+            continue
+        who = "MPC" if a < b else "LQR"
+        better.append(f"{k} {who} ({a:.3g} MPC vs {b:.3g} LQR)")
+    out = "MPC vs LQR: better " + ("; ".join(better) if better else "on nothing")
+    return out + (f"; alike (within {alike:.0%}): {', '.join(same)}" if same else "")

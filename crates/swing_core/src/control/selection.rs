@@ -68,6 +68,9 @@ pub struct SelectionSettings {
     pub step: f64,
     /// Pass bounds (fractions of the step).
     pub bounds: CheckBounds,
+    /// What the plant of the check is and where its parameters came from, written into the
+    /// diagnostics as `control_check.plant` (e.g. `whitebox(payload mass 0.2 kg from thrust)`).
+    pub plant_label: String,
 }
 
 impl Default for SelectionSettings {
@@ -78,6 +81,7 @@ impl Default for SelectionSettings {
             vehicle_drag: vec![0.12],
             step: 2.0,
             bounds: CheckBounds::default(),
+            plant_label: "whitebox".into(),
         }
     }
 }
@@ -251,10 +255,13 @@ pub fn select_for_control(
         .unwrap_or(best);
     let extra = &mut model.diagnostics.extra;
     extra.insert("selected".into(), candidate_row(selected, states));
+    if let Some(v) = &selected.verdict {
+        extra.insert("stability_screen".into(), v.to_json());
+    }
     extra.insert(
         "control_check".into(),
         json!({
-            "plant": "whitebox",
+            "plant": settings.plant_label,
             "input_lags": settings.input_lags,
             "vehicle_drag": settings.vehicle_drag,
             "step": settings.step,

@@ -25,6 +25,13 @@ pub struct Nmae {
     pub mean: f64,
 }
 
+/// The delay count whose history the scoring's first start leaves room for: `score_delays`
+/// (so that every model up to that q is scored from the same starts), at least `q`, and at
+/// most what the data leave before a `horizon`-step rollout.
+pub fn score_delays(len: usize, q: usize, horizon: usize, score_delays: usize) -> usize {
+    q.max(score_delays.min(len.saturating_sub(horizon)))
+}
+
 /// `count` start samples evenly spaced in [q−1, len−1−horizon] (both ends included).
 pub fn start_points(
     len: usize,

@@ -14,10 +14,11 @@ pub mod pipeline;
 pub mod search;
 pub mod settings;
 pub mod smooth;
+pub mod stability;
 pub mod whitebox;
 
 pub use error::SysidError;
 pub use hankel::Trajectory;
 pub use metrics::Nmae;
 pub use model::{Diagnostics, LinearModel, Offset, WhiteboxEstimates};
-pub use settings::{IdentifyMethod, IdentifySettings, SelectBy};
+pub use settings::{IdentifyMethod, IdentifySettings, SearchMode, SelectBy};

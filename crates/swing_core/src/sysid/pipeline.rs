@@ -9,8 +9,8 @@ use serde_json::{json, Value};
 use super::error::{data, SysidError};
 use super::hankel::Trajectory;
 use super::model::LinearModel;
-use super::search::{coarse_to_fine, grid_search, Candidate, SearchResult};
-use super::settings::{IdentifyMethod, IdentifySettings};
+use super::search::{grid_search, refine, Candidate, SearchResult};
+use super::settings::{IdentifyMethod, IdentifySettings, SearchMode};
 use super::{dmdc, havokc, metrics, whitebox};
 use crate::plant::{PendulumModel, GRAVITY};
 
@@ -72,8 +72,8 @@ pub fn fit(
     }
 }
 
-/// Score `model` on the held-out span, storing the NMAE in its diagnostics; a span too short
-/// for the rollout leaves the model unscored.
+/// Score `model` on the held-out span from the starts a search uses (`score_delays`), storing
+/// the NMAE in its diagnostics; a span too short for the rollout leaves the model unscored.
 pub fn score(
     model: &mut LinearModel,
     test: &Trajectory<'_>,
@@ -82,7 +82,12 @@ pub fn score(
     if test.len == 0 {
         return Ok(());
     }
-    match metrics::rollout_nmae(model, test, settings.rollout_samples(), settings.starts) {
+    let horizon = settings.rollout_samples();
+    let q = metrics::score_delays(test.len, model.delays, horizon, settings.score_delays);
+    let scored = metrics::start_points(test.len, q, horizon, settings.starts)
+        .and_then(|starts| metrics::Scorer::new(test.clone(), starts, horizon))
+        .and_then(|mut scorer| scorer.score_model(model));
+    match scored {
         Ok(nm) => {
             model.diagnostics.test_nmae = Some(nm.mean);
             Ok(())
@@ -126,6 +131,8 @@ pub fn candidate_row(c: &Candidate, states: &[String]) -> Value {
         "per_state": per,
         "stable": c.stable,
         "spectral_radius": c.spectral_radius,
+        "integrator_eigenvalue": c.verdict.as_ref().and_then(|v| v.integrator),
+        "stability_screen": c.verdict.as_ref().map(|v| v.to_json()),
     })
 }
 
@@ -137,7 +144,8 @@ fn finite_or_null(v: f64) -> Value {
     }
 }
 
-/// Run the search of `settings` (coarse grid, then the fine one when set).
+/// Run the search of `settings`: `refine` (coarse grid, then unit steps around several
+/// winners when `fine` is set), or `exhaustive`.
 pub fn search(
     train: &Trajectory<'_>,
     test: &Trajectory<'_>,
@@ -147,9 +155,21 @@ pub fn search(
         .search_settings()
         .ok_or_else(|| super::error::config("search applies to dmdc and havokc, not whitebox"))?;
     let grid = settings.coarse_grid();
-    match settings.fine {
-        Some([qr, pr]) => coarse_to_fine(train, test, &grid, qr, pr, &scoring),
-        None => grid_search(train, test, &grid, &scoring),
+    match (settings.search_mode, settings.fine) {
+        (SearchMode::Exhaustive, _) => {
+            grid_search(train, test, &settings.exhaustive_grid(), &scoring)
+        }
+        (SearchMode::Refine, Some([qr, pr])) => refine(
+            train,
+            test,
+            &grid,
+            settings.dense_ranks,
+            settings.winners,
+            qr,
+            pr,
+            &scoring,
+        ),
+        (SearchMode::Refine, None) => grid_search(train, test, &grid, &scoring),
     }
 }
 

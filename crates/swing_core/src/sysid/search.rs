@@ -6,15 +6,20 @@
 //! and one SVD per q for all p (see `dmdc`), adding modes incrementally as p grows; HAVOKc
 //! takes one SVD of Π per q. Candidates whose rollout diverges score ∞.
 //!
-//! Screening: a candidate whose `A` has spectral radius above 1 + `stability_tolerance` is
-//! unstable and never selected. Eigenvalues are costly next to a rollout, so per q the
-//! candidates are checked in ascending NMAE order until the first stable one: that gives
-//! the best stable p of every q (the error-vs-q curve, the Pareto elbow of figure 4.6) and
-//! hence the best stable candidate overall. The tolerance admits the velocity integrator
-//! (an eigenvalue at exactly 1 in the true plant, estimated at 1 ± a little).
+//! Screening (`stability`): a candidate with an eigenvalue above 1 + `stability_tolerance`
+//! is unstable and never selected — except the velocity integrator's eigenvalue, judged on
+//! its own within 1 ± `integrator_tolerance`. Eigenvalues are costly next to a rollout, so
+//! per q the candidates are checked in ascending NMAE order until the first stable one: that
+//! gives the best stable p of every q (the error-vs-q curve, the Pareto elbow of figure 4.6)
+//! and hence the best stable candidate overall.
+//!
+//! Scoring: every rollout starts at or after sample `score_delays` − 1 of the test span (or
+//! the grid's largest q − 1, if larger), so that a candidate scores the same in every grid
+//! up to q = `score_delays` and two searches' NMAEs compare.
 //!
 //! Coarse → fine: [`coarse_to_fine`] runs a coarse grid, then a unit-step grid of q and p
-//! around the coarse winner.
+//! around the coarse winner; [`refine`] (the default search) runs a coarse grid in which
+//! every low rank is tried, then unit steps around several distinct coarse winners.
 
 use nalgebra::{DMatrix, DVector};
 
@@ -23,7 +28,8 @@ use super::error::{config, SysidError};
 use super::hankel::Trajectory;
 use super::havokc::HavokcSvd;
 use super::metrics::{start_points, DelayRows, Scorer};
-use super::model::{spectral_radius, LinearModel, Offset};
+use super::model::{LinearModel, Offset};
+use super::stability::{Screen, Verdict};
 
 /// Which data-driven method a search fits.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -95,8 +101,14 @@ pub struct SearchSettings {
     pub horizon: usize,
     /// Number of rollout start points (10 in the thesis).
     pub starts: usize,
-    /// Spectral radius allowed above 1 (see module docs).
+    /// Spectral radius allowed above 1 for every eigenvalue but the integrator's.
     pub stability_tolerance: f64,
+    /// Distance from 1 allowed to the velocity integrator's eigenvalue (`stability`).
+    pub integrator_tolerance: f64,
+    /// Indices of the velocity states in a block; `None` = the first half of the states.
+    pub velocity_states: Option<Vec<usize>>,
+    /// Rollouts start at or after sample `score_delays` − 1 of the test data (module docs).
+    pub score_delays: usize,
 }
 
 impl Default for SearchSettings {
@@ -108,6 +120,37 @@ impl Default for SearchSettings {
             horizon: 667,
             starts: 10,
             stability_tolerance: 1e-3,
+            integrator_tolerance: super::settings::DEFAULT_INTEGRATOR_TOLERANCE,
+            velocity_states: None,
+            score_delays: super::settings::DEFAULT_SCORE_DELAYS,
+        }
+    }
+}
+
+impl SearchSettings {
+    /// The stability screen for data of `train`.
+    pub fn screen(&self, train: &Trajectory<'_>) -> Screen {
+        let n = train.n;
+        let scale = (0..n)
+            .map(|j| {
+                let len = train.len.max(1) as f64;
+                let mean = (0..train.len).map(|k| train.state(k)[j]).sum::<f64>() / len;
+                ((0..train.len)
+                    .map(|k| (train.state(k)[j] - mean).powi(2))
+                    .sum::<f64>()
+                    / len)
+                    .sqrt()
+            })
+            .collect();
+        Screen {
+            tolerance: self.stability_tolerance,
+            integrator_tolerance: self.integrator_tolerance,
+            states: n,
+            velocity: self
+                .velocity_states
+                .clone()
+                .unwrap_or_else(|| (0..n / 2).collect()),
+            scale,
         }
     }
 }
@@ -127,6 +170,8 @@ pub struct Candidate {
     pub stable: Option<bool>,
     /// Spectral radius, when checked.
     pub spectral_radius: Option<f64>,
+    /// The stability screen's verdict, when checked.
+    pub verdict: Option<Verdict>,
 }
 
 /// Outcome of a search.
@@ -162,6 +207,63 @@ pub fn grid_search(
     if grid.delays.is_empty() {
         return Err(config("the search grid has no delay values"));
     }
+    let plan: Vec<(usize, RankChoice)> = grid
+        .delays
+        .iter()
+        .map(|q| (*q, RankChoice::Grid(grid.clone())))
+        .collect();
+    search_plan(train, test, &plan, settings)
+}
+
+/// The ranks to try for one q of a plan.
+#[derive(Clone, Debug)]
+enum RankChoice {
+    /// The ranks of a grid (which depend on the numerical full rank of q's data).
+    Grid(Grid),
+    /// Every rank in these inclusive windows (capped at the full rank).
+    Windows(Vec<(usize, usize)>),
+    /// Every rank up to the first value, and the grid's ranks above it.
+    Dense(usize, Grid),
+}
+
+impl RankChoice {
+    fn ranks(&self, q: usize, n: usize, m: usize, constants: usize, full: usize) -> Vec<usize> {
+        match self {
+            RankChoice::Grid(g) => g.ranks(q, n, m, constants, full),
+            RankChoice::Windows(w) => {
+                let top = (n * q + m + constants).min(full);
+                let mut r: Vec<usize> = w
+                    .iter()
+                    .flat_map(|(lo, hi)| (*lo).max(1)..=(*hi).min(top))
+                    .collect();
+                r.sort_unstable();
+                r.dedup();
+                r
+            }
+            RankChoice::Dense(d, g) => {
+                let top = (n * q + m + constants).min(full);
+                let mut r: Vec<usize> = (1..=(*d).min(top)).collect();
+                r.extend(
+                    g.ranks(q, n, m, constants, full)
+                        .into_iter()
+                        .filter(|p| p > d),
+                );
+                r
+            }
+        }
+    }
+}
+
+/// Score every (q, ranks of q) of `plan`, screen, and return the best stable candidate.
+fn search_plan(
+    train: &Trajectory<'_>,
+    test: &Trajectory<'_>,
+    plan: &[(usize, RankChoice)],
+    settings: &SearchSettings,
+) -> Result<SearchResult, SysidError> {
+    if plan.is_empty() {
+        return Err(config("the search grid has no delay values"));
+    }
     if !(settings.dt.is_finite() && settings.dt > 0.0) {
         return Err(config(format!("dt must be positive, not {}", settings.dt)));
     }
@@ -170,17 +272,26 @@ pub fn grid_search(
             "training and test data have different columns",
         ));
     }
-    let q_max = *grid.delays.iter().max().expect("non-empty");
-    if grid.delays.contains(&0) {
+    let q_max = plan.iter().map(|(q, _)| *q).max().expect("non-empty");
+    if plan.iter().any(|(q, _)| *q == 0) {
         return Err(config("delays must be at least 1"));
     }
     let (n, m) = (train.n, train.m);
-    let starts = start_points(test.len, q_max, settings.horizon, settings.starts)?;
+    let q_score =
+        super::metrics::score_delays(test.len, q_max, settings.horizon, settings.score_delays);
+    let starts = start_points(test.len, q_score, settings.horizon, settings.starts)?;
+    let screen = settings.screen(train);
     let mut scorer = Scorer::new(test.clone(), starts, settings.horizon)?;
     // A rollout further than 100 ranges off has diverged; stop it early.
     scorer.abort_ranges = 100.0;
     let basis = match settings.method {
-        Method::Dmdc => Some(DmdcBasis::new(train, q_max, settings.offset)?),
+        // The basis of the scoring's q, so that a candidate's fit, like its score, is the
+        // same in every grid up to `score_delays`.
+        Method::Dmdc => Some(DmdcBasis::new(
+            train,
+            q_score.min(train.len.saturating_sub(2)).max(q_max),
+            settings.offset,
+        )?),
         Method::Havokc => None,
     };
     let mut table: Vec<Candidate> = Vec::new();
@@ -188,7 +299,8 @@ pub fn grid_search(
     let mut best: Option<usize> = None;
     let mut input_mean = vec![0.0; m];
     let mut sigma_of_best = Vec::new();
-    for &q in &grid.delays {
+    for (q, choice) in plan {
+        let q = *q;
         let source = match &basis {
             Some(b) => Source::Dmdc(b.svd(q)?),
             None => Source::Havokc(HavokcSvd::new(train, q, settings.offset)?),
@@ -202,7 +314,7 @@ pub fn grid_search(
             (None, Source::Havokc(s)) => s.input_mean().to_vec(),
             _ => unreachable!(),
         };
-        let ranks = grid.ranks(q, n, m, settings.offset.constant_columns(), full);
+        let ranks = choice.ranks(q, n, m, settings.offset.constant_columns(), full);
         let first = table.len();
         let mut g = faer::Mat::<f64>::zeros(n, full);
         let mut prev = 0;
@@ -228,6 +340,7 @@ pub fn grid_search(
                 per_state: score.per_state,
                 stable: None,
                 spectral_radius: None,
+                verdict: None,
             });
             tops.push(top);
         }
@@ -249,10 +362,11 @@ pub fn grid_search(
                 &t.b,
                 &t.c,
             );
-            let rho = spectral_radius(&model.a)?;
-            let ok = rho <= 1.0 + settings.stability_tolerance;
-            table[i].spectral_radius = Some(rho);
+            let verdict = screen.judge(&model.a)?;
+            let ok = verdict.stable;
+            table[i].spectral_radius = Some(verdict.spectral_radius);
             table[i].stable = Some(ok);
+            table[i].verdict = Some(verdict);
             if ok {
                 if best.is_none_or(|b| table[i].nmae < table[b].nmae) {
                     best = Some(i);
@@ -274,7 +388,9 @@ pub fn grid_search(
     }
     let Some(bi) = best else {
         return Err(SysidError::Identification(format!(
-            "no stable candidate among {} (every model diverged or has spectral radius above {})",
+            "no stable candidate among {} (every model diverged or has an eigenvalue above {} \
+             besides the velocity integrator; raise stability_tolerance or \
+             integrator_tolerance to admit more)",
             table.len(),
             1.0 + settings.stability_tolerance
         )));
@@ -296,6 +412,12 @@ pub fn grid_search(
     model.diagnostics.singular_values = sigma_of_best;
     model.diagnostics.test_nmae = Some(c.nmae);
     model.diagnostics.spectral_radius = c.spectral_radius;
+    if let Some(v) = &c.verdict {
+        model
+            .diagnostics
+            .extra
+            .insert("stability_screen".into(), v.to_json());
+    }
     model.diagnostics.fit_nmae = Some(super::metrics::one_step_nmae(&model, train)?);
     Ok(SearchResult {
         table,
@@ -330,6 +452,75 @@ pub fn coarse_to_fine(
     };
     let second = grid_search(train, test, &fine, settings)?;
     // Report both stages; the fine one can only improve on the coarse winner's neighbourhood.
+    let mut table = first.table;
+    let offset = table.len();
+    table.extend(second.table);
+    let (best, model) = if second.model.diagnostics.test_nmae <= first.model.diagnostics.test_nmae {
+        (offset + second.best, second.model)
+    } else {
+        (first.best, first.model)
+    };
+    Ok(SearchResult { table, best, model })
+}
+
+/// The default search, in two stages.
+///
+/// 1. **Coarse**: the q of `coarse.delays`, each with every rank up to `dense_ranks` (narrow
+///    low-rank optima are common on real data: the held-out NMAE over p is jagged, an
+///    optimum is often one p wide) and the grid's rank steps above.
+/// 2. **Refinement**: unit steps within ±`q_radius`, ±`p_radius` around the best stable
+///    candidate of each of the `winners` delay counts whose best stable NMAE is lowest
+///    (several, because near-equal optima at distant q are common).
+///
+/// The better of the two stages' screened winners is returned.
+#[allow(clippy::too_many_arguments)]
+pub fn refine(
+    train: &Trajectory<'_>,
+    test: &Trajectory<'_>,
+    coarse: &Grid,
+    dense_ranks: usize,
+    winners: usize,
+    q_radius: usize,
+    p_radius: usize,
+    settings: &SearchSettings,
+) -> Result<SearchResult, SysidError> {
+    if coarse.delays.is_empty() {
+        return Err(config("the search grid has no delay values"));
+    }
+    let plan: Vec<(usize, RankChoice)> = coarse
+        .delays
+        .iter()
+        .map(|q| (*q, RankChoice::Dense(dense_ranks, coarse.clone())))
+        .collect();
+    let first = search_plan(train, test, &plan, settings)?;
+    // The best stable candidate of each q, best first.
+    let mut per_q: Vec<&Candidate> = Vec::new();
+    for c in first.table.iter().filter(|c| c.stable == Some(true)) {
+        match per_q.iter_mut().find(|b| b.delays == c.delays) {
+            Some(b) if c.nmae < b.nmae => *b = c,
+            Some(_) => {}
+            None => per_q.push(c),
+        }
+    }
+    per_q.sort_by(|a, b| a.nmae.total_cmp(&b.nmae));
+    let q_top = coarse.delays.iter().copied().max().unwrap_or(1) + q_radius;
+    let q_top = q_top.min(settings.score_delays.max(1)).max(1);
+    let mut windows: Vec<(usize, Vec<(usize, usize)>)> = Vec::new();
+    for c in per_q.iter().take(winners.max(1)) {
+        let w = (c.rank.saturating_sub(p_radius).max(1), c.rank + p_radius);
+        for q in c.delays.saturating_sub(q_radius).max(1)..=(c.delays + q_radius).min(q_top) {
+            match windows.iter_mut().find(|(wq, _)| *wq == q) {
+                Some((_, ws)) => ws.push(w),
+                None => windows.push((q, vec![w])),
+            }
+        }
+    }
+    windows.sort_by_key(|(q, _)| *q);
+    let plan: Vec<(usize, RankChoice)> = windows
+        .into_iter()
+        .map(|(q, w)| (q, RankChoice::Windows(w)))
+        .collect();
+    let second = search_plan(train, test, &plan, settings)?;
     let mut table = first.table;
     let offset = table.len();
     table.extend(second.table);

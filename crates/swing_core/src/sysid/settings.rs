@@ -8,12 +8,30 @@ use serde::{Deserialize, Serialize};
 
 use super::model::Offset;
 use super::search::{Grid, Method, SearchSettings};
+use super::stability;
 use crate::config::{finite, non_negative, positive, ConfigError};
 
 /// Sample time of identification and of the MPC built on its models [s] (thesis 4.6.4).
 pub const DEFAULT_DT: f64 = 0.03;
 /// Delay count q of a fit without search.
 pub const DEFAULT_DELAYS: usize = 20;
+/// Largest q of the exhaustive search, and the first rollout start (+1) of every search's
+/// scoring, so that the NMAEs of the default and the exhaustive search compare.
+pub const DEFAULT_SCORE_DELAYS: usize = 80;
+/// Distance from 1 allowed to the velocity integrator's eigenvalue (see `stability`).
+pub const DEFAULT_INTEGRATOR_TOLERANCE: f64 = 5e-3;
+
+/// How a search walks the (q, p) plane.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SearchMode {
+    /// Coarse grid (every rank up to `dense_ranks`, `rank_step` above), then unit steps
+    /// within `fine` around the best p of each of the `winners` best q (`search::refine`).
+    #[default]
+    Refine,
+    /// Every q of `search_delays` (default 2…`score_delays`) and every p: the reference.
+    Exhaustive,
+}
 
 /// Which identification method to run.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -76,6 +94,14 @@ pub struct IdentifySettings {
     pub search: bool,
     /// How a search chooses among its candidates.
     pub select: SelectBy,
+    /// How a search walks the (q, p) plane: `refine` (default) or `exhaustive`.
+    pub search_mode: SearchMode,
+    /// Refine: every rank up to this one is tried on the coarse grid.
+    pub dense_ranks: usize,
+    /// Refine: number of best delay counts refined in unit steps of `fine`.
+    pub winners: usize,
+    /// First rollout start + 1 of the scoring, and the exhaustive search's largest q.
+    pub score_delays: usize,
     /// Sample time the data are resampled to [s].
     pub dt: f64,
     /// Held-out span at the start of the flight, used for scoring and selection [s].
@@ -89,7 +115,8 @@ pub struct IdentifySettings {
     pub smooth: bool,
     /// Smoothing window [samples].
     pub smooth_window: usize,
-    /// Delay counts of the search's coarse grid (default q = 2, 6, …, 58).
+    /// Delay counts of the search's coarse grid (default q = 2, 6, …, 78); of the
+    /// exhaustive search (default 2…`score_delays`).
     pub search_delays: Option<Vec<usize>>,
     /// Smallest rank of the coarse grid.
     pub rank_start: usize,
@@ -97,8 +124,10 @@ pub struct IdentifySettings {
     pub rank_step: usize,
     /// Unit-step refinement radius (q, p) around the coarse winner; `None` = grid only.
     pub fine: Option<[usize; 2]>,
-    /// Spectral radius a candidate may have above 1 and still count as stable.
+    /// |λ| − 1 allowed to every eigenvalue of a candidate but the velocity integrator's.
     pub stability_tolerance: f64,
+    /// |λ − 1| allowed to the velocity integrator's eigenvalue (see `sysid::stability`).
+    pub integrator_tolerance: f64,
     /// White-box: payload mass [kg]; `None` = RLS on hover thrust (needs a thrust column).
     pub payload_mass: Option<f64>,
     /// White-box: cable length [m]; `None` = from the FFT peak of the swing (eq. 4.8).
@@ -120,6 +149,10 @@ impl Default for IdentifySettings {
             rank: None,
             search: false,
             select: SelectBy::Control,
+            search_mode: SearchMode::Refine,
+            dense_ranks: 20,
+            winners: 4,
+            score_delays: DEFAULT_SCORE_DELAYS,
             dt: DEFAULT_DT,
             test_span: 40.0,
             rollout: 20.0,
@@ -131,6 +164,7 @@ impl Default for IdentifySettings {
             rank_step: 5,
             fine: Some([2, 4]),
             stability_tolerance: 1e-3,
+            integrator_tolerance: DEFAULT_INTEGRATOR_TOLERANCE,
             payload_mass: None,
             cable_length: None,
             vehicle_mass: crate::plant::params::VehicleParams::default().mass,
@@ -199,6 +233,13 @@ impl IdentifySettings {
             return Err(ConfigError::new("rank_step", "must be at least 1"));
         }
         non_negative("stability_tolerance", self.stability_tolerance)?;
+        non_negative("integrator_tolerance", self.integrator_tolerance)?;
+        if self.winners == 0 {
+            return Err(ConfigError::new("winners", "must be at least 1"));
+        }
+        if self.score_delays == 0 {
+            return Err(ConfigError::new("score_delays", "must be at least 1"));
+        }
         if let Some(m) = self.payload_mass {
             positive("payload_mass", m)?;
         }
@@ -252,7 +293,28 @@ impl IdentifySettings {
             horizon: self.rollout_samples(),
             starts: self.starts,
             stability_tolerance: self.stability_tolerance,
+            integrator_tolerance: self.integrator_tolerance,
+            velocity_states: None,
+            score_delays: self.score_delays,
         })
+    }
+
+    /// The exhaustive grid: every q of `search_delays` (default 2…`score_delays`), every p.
+    pub fn exhaustive_grid(&self) -> Grid {
+        Grid {
+            delays: self
+                .search_delays
+                .clone()
+                .unwrap_or_else(|| (2..=self.score_delays.max(2)).collect()),
+            rank_start: 1,
+            rank_step: 1,
+            rank_window: None,
+        }
+    }
+
+    /// The stability screen's criterion in words, for diagnostics.
+    pub fn stability_criterion(&self) -> &'static str {
+        stability::CRITERION
     }
 
     /// The search's coarse grid.
@@ -261,7 +323,7 @@ impl IdentifySettings {
             delays: self
                 .search_delays
                 .clone()
-                .unwrap_or_else(|| (2..=60).step_by(4).collect()),
+                .unwrap_or_else(|| (2..=78).step_by(4).collect()),
             rank_start: self.rank_start,
             rank_step: self.rank_step,
             rank_window: None,
@@ -297,7 +359,7 @@ mod tests {
         let s = IdentifySettings::default();
         assert_eq!(
             s.coarse_grid().delays,
-            (2..=58).step_by(4).collect::<Vec<_>>()
+            (2..=78).step_by(4).collect::<Vec<_>>()
         );
         assert_eq!(s.fit_delays(), DEFAULT_DELAYS);
         let sc = s.search_settings().unwrap();
@@ -307,5 +369,23 @@ mod tests {
             ..IdentifySettings::default()
         };
         assert!(wb.search_settings().is_none());
+    }
+
+    #[test]
+    fn the_exhaustive_grid_and_the_new_search_fields() {
+        let s = IdentifySettings::from_json(r#"{"search_mode": "exhaustive"}"#).unwrap();
+        let g = s.exhaustive_grid();
+        assert_eq!(g.delays, (2..=80).collect::<Vec<_>>());
+        assert_eq!((g.rank_start, g.rank_step), (1, 1));
+        assert!(s.stability_criterion().contains("velocity integrator"));
+        for (json, field) in [
+            (r#"{"winners": 0}"#, "winners"),
+            (r#"{"score_delays": 0}"#, "score_delays"),
+            (r#"{"integrator_tolerance": -1.0}"#, "integrator_tolerance"),
+        ] {
+            assert_eq!(IdentifySettings::from_json(json).unwrap_err().field, field);
+        }
+        let e = IdentifySettings::from_json(r#"{"search_mode": "grid"}"#).unwrap_err();
+        assert!(e.to_string().contains("search_mode"), "{e}");
     }
 }
