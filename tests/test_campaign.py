@@ -205,7 +205,7 @@ def test_failure_rule():
         "peak_swing_deg": 10.0,
         "v_settle_s": 3.0,
         "ss_error": 0.01,
-        "swing_excess_deg_s": 0.5,
+        "swing_excess_iae_deg_s": 0.5,
         "swing_excess_vs_pid": 0.05,
     }
     assert failure_reason(ok) == ""
@@ -213,9 +213,11 @@ def test_failure_rule():
     assert failure_reason({**ok, "v_settle_s": math.inf}) == "v_not_settled"
     assert failure_reason({**ok, "ss_error": 0.02}) == "ss_error"
     assert failure_reason({**ok, "peak_swing_deg": 80.0}) == "diverged"
-    assert failure_reason({**ok, "swing_excess_deg_s": 5.0, "swing_excess_vs_pid": 0.5}) == "swing"
+    assert (
+        failure_reason({**ok, "swing_excess_iae_deg_s": 5.0, "swing_excess_vs_pid": 0.5}) == "swing"
+    )
     assert failure_reason({**ok, "swing_excess_vs_pid": 0.5}) == ""  # excess below 1 deg·s
-    pid = {**ok, "controller": "pid", "swing_excess_deg_s": 5.0, "swing_excess_vs_pid": 1.0}
+    pid = {**ok, "controller": "pid", "swing_excess_iae_deg_s": 5.0, "swing_excess_vs_pid": 1.0}
     assert failure_reason(pid) == ""
 
 

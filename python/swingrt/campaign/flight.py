@@ -26,7 +26,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from swingrt.metrics import METRICS, step_metrics, swing_iae_floor
+from swingrt.metrics import METRICS, step_metrics
 
 #: ss_error at or above which a flight fails [m/s].
 SS_ERROR_LIMIT = 0.02
@@ -39,15 +39,15 @@ SWING_EXCESS_MIN = 1.0
 
 #: Identification columns of a row.
 IDENT_COLUMNS = ("q", "p", "test_nmae", "control_check_passed", "wb_payload_mass", "wb_length")
-#: Columns added besides :data:`swingrt.metrics.METRICS` (the swing IAE's floor and excess).
-EXTRA_METRICS = tuple(c for c in ("swing_floor_deg_s", "swing_excess_deg_s") if c not in METRICS)
+#: The swing IAE's excess above its momentum floor (a ``metrics.csv`` column).
+EXCESS = "swing_excess_iae_deg_s"
 #: The swing IAE excess over PID's in the same sample (NaN when PID is not flown).
 RATIO = "swing_excess_vs_pid"
 
 
 def metric_columns() -> tuple[str, ...]:
-    """Every metric column: ``metrics.csv``'s, then the floor and excess of the swing IAE."""
-    return tuple(METRICS) + EXTRA_METRICS + (RATIO,)
+    """Every metric column: ``metrics.csv``'s, then the excess relative to PID's."""
+    return (*METRICS, RATIO)
 
 
 def _cell(v: Any) -> Any:
@@ -99,7 +99,7 @@ def failure_reason(row: dict[str, Any]) -> str:
         row.get("controller") != "pid"
         and ratio is not None
         and ratio >= SWING_EXCESS_RATIO
-        and row.get("swing_excess_deg_s", 0.0) >= SWING_EXCESS_MIN
+        and row.get(EXCESS, 0.0) >= SWING_EXCESS_MIN
     ):
         return "swing"
     return ""
@@ -177,15 +177,7 @@ def fly_sample(
                 lqr_settings=exp.lqr or None,
             )
             m = step_metrics(trace, t0=exp.step["t"], axis=axis)
-            metrics = {c: float(m.get(c, math.nan)) for c in METRICS}
-            if EXTRA_METRICS:
-                floor = swing_iae_floor(trace, t0=exp.step["t"], axis=axis)
-                extra = {
-                    "swing_floor_deg_s": floor,
-                    "swing_excess_deg_s": metrics["swing_iae_deg_s"] - floor,
-                }
-                metrics.update({c: extra[c] for c in EXTRA_METRICS})
-            row.update(metrics)
+            row.update({c: float(m.get(c, math.nan)) for c in METRICS})
             row["fallback"] = str(extras.get("fallback") or "")
             traces[ctrl] = trace
             if out is not None:
@@ -198,8 +190,8 @@ def fly_sample(
         rows.append(row)
     pid = next((r for r in rows if r["controller"] == "pid"), None)
     for row in rows:
-        ref = math.nan if pid is None else pid.get("swing_excess_deg_s", math.nan)
-        row[RATIO] = row["swing_excess_deg_s"] / ref if ref and ref > 0 else math.nan
+        ref = math.nan if pid is None else pid.get(EXCESS, math.nan)
+        row[RATIO] = row[EXCESS] / ref if ref and ref > 0 else math.nan
         row["failure"] = failure_reason(row)
     return rows, traces
 

@@ -56,7 +56,7 @@ def param_names(rows: Sequence[dict[str, Any]]) -> list[str]:
 
 def _swing_metric() -> str:
     cols = metric_columns()
-    return "swing_excess_deg_s" if "swing_excess_deg_s" in cols else "swing_iae_deg_s"
+    return "swing_excess_iae_deg_s" if "swing_excess_iae_deg_s" in cols else "swing_iae_deg_s"
 
 
 def worst_samples(rows: Sequence[dict[str, Any]], n: int = WORST) -> list[dict[str, Any]]:
