@@ -32,7 +32,7 @@ from swingrt.testing import write_ulog
 pytestmark = pytest.mark.hostile
 
 SETTINGS = settings(
-    max_examples=150,
+    max_examples=300,
     deadline=None,
     derandomize=True,
     database=None,
@@ -259,6 +259,19 @@ def test_usage_errors_are_one_line(capsys):
     assert err.count("\n") == 1 and "swingrt simulate: error:" in err and "--help" in err
 
 
+@pytest.mark.parametrize(
+    ("flag", "value"),
+    [("--timeout", "inf"), ("--stale-factor", "inf"), ("--budget", "inf"),
+     ("--acc-limit", "inf"), ("--timeout", "nan"), ("--system-id", "999")],
+)  # fmt: skip
+def test_fly_refuses_settings_that_switch_safety_off(capsys, files, flag, value):
+    # --timeout inf waited for ever on a silent link; an infinite stale factor or budget
+    # switched the watchdog off.
+    args = ["fly", "--connect", "udpout:127.0.0.1:9", "--model", files["bad_model"], flag, value]
+    code, err = _run_cli(capsys, args)
+    assert code == 2 and flag in err and err.count("\n") == 1, err
+
+
 def test_empty_and_directory_inputs(tmp_path):
     for suffix in (".csv", ".parquet", ".ulg"):
         p = tmp_path / f"empty{suffix}"
@@ -449,7 +462,7 @@ def test_cli_fuzzed_arguments(capsys, files, tmp_path, command):
     try:
 
         @settings(
-            max_examples=40,
+            max_examples=60,
             deadline=None,
             derandomize=True,
             database=None,
