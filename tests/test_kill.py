@@ -200,6 +200,8 @@ def _kill_loop(target: KillTarget, tmp_path: Path, inputs: dict) -> list[tuple[i
         proc.kill()
         proc.wait(timeout=10)
         results.append(_check_outputs(out, old))
+    # Shown with -s: how the kills landed (outputs old / new / absent after each kill).
+    print(f"{target.name}: (old, new, absent) after each kill: {results}")
     return results
 
 

@@ -252,14 +252,22 @@ def _stop(proc: subprocess.Popen, sig=signal.SIGINT, timeout: float = 10.0) -> s
     return out or ""
 
 
-def _flight(tmp_path: Path, model: Path, fault: str, seed: int = 13):
+#: Simulated vehicles the proxy can stand in front of: name -> argv(port, log). Another
+#: vehicle (``swingrt hil``) slots in here; every fault test then runs against it too.
+VEHICLES = {
+    "sitl": lambda port, log: [
+        sys.executable, "-m", "swingrt", "sitl", "--listen", f"udp:127.0.0.1:{port}",
+        "--log", str(log),
+    ],
+}  # fmt: skip
+
+
+def _flight(tmp_path: Path, model: Path, fault: str, seed: int = 13, vehicle: str = "sitl"):
     vport = _free_port()
     vlog, nlog = tmp_path / "vehicle.parquet", tmp_path / "node.parquet"
     sitl = subprocess.Popen(
-        [sys.executable, "-m", "swingrt", "sitl", "--listen", f"udp:127.0.0.1:{vport}",
-         "--log", str(vlog)],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-    )  # fmt: skip
+        VEHICLES[vehicle](vport, vlog), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+    )
     proxy = Proxy(vport, fault, seed)
     proxy.start()
     mission = tmp_path / "mission.toml"

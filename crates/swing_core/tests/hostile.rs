@@ -118,3 +118,64 @@ fn rollout_start_points_do_not_overflow() {
     let e = start_points(100, 3, usize::MAX, 10).unwrap_err();
     assert!(e.to_string().contains("too short"), "{e}");
 }
+
+/// fuzz/artifacts/scenario_json/crash-e1def5e57f1f9f45: a JSON seed above i64::MAX was
+/// accepted, and the scenario's TOML (`to_toml`) then did not parse back.
+#[test]
+fn seeds_beyond_toml_integers_are_refused() {
+    let mut json = serde_json::to_value(Scenario::default_step()).unwrap();
+    json["seed"] = serde_json::json!(u64::MAX);
+    let e = Scenario::from_json(&json.to_string()).unwrap_err();
+    assert_eq!(e.field, "seed");
+    let sc = Scenario::from_json(
+        &serde_json::to_string(&Scenario {
+            seed: i64::MAX as u64,
+            ..Scenario::default_step()
+        })
+        .unwrap(),
+    )
+    .unwrap();
+    assert_eq!(Scenario::from_toml(&sc.to_toml()).unwrap(), sc);
+}
+
+/// fuzz/artifacts/identify/crash-e834407164bf3d22 (and three more, all white-box): finite
+/// inputs of f64::MAX overflowed the input mean (or the offset) to ∞, and `identify`
+/// returned a model that does not validate.
+#[test]
+fn identify_refuses_data_that_overflows_the_model() {
+    use swing_core::sysid::pipeline::identify;
+    use swing_core::sysid::{IdentifyMethod, IdentifySettings, Trajectory};
+    let x = vec![0.1; 32];
+    let u = [
+        3.428,
+        -16.262,
+        -3.272,
+        -5.944,
+        -30.386,
+        -0.0,
+        -7.467,
+        0.0,
+        3.1e-305,
+        10.965,
+        -7.433,
+        -22.418,
+        f64::MAX,
+        3.506,
+        -8.979,
+        f64::MAX,
+    ];
+    let traj = Trajectory::new(&x, 2, &u, 1).unwrap();
+    let settings = IdentifySettings {
+        method: IdentifyMethod::Whitebox,
+        offset: Offset::Mean,
+        test_span: 0.1056,
+        payload_mass: Some(3.858),
+        vehicle_mass: 20.685,
+        swing_band: [0.259, 48.33],
+        ..IdentifySettings::default()
+    };
+    let states = vec!["vn".to_string(), "swing_n".to_string()];
+    let e = identify(&traj, &states, &["acc_n".to_string()], &settings, None)
+        .expect_err("a model with an infinite input mean");
+    assert!(e.to_string().contains("no usable model"), "{e}");
+}

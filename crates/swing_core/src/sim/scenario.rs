@@ -411,6 +411,23 @@ impl Scenario {
             ));
         }
         in_range("physics_dt", self.physics_dt, 1e-5, 0.01)?;
+        // TOML integers are i64: a larger seed would write a scenario TOML (reports,
+        // reproducibility) that cannot be read back.
+        let seeds = [
+            ("seed", Some(self.seed)),
+            (
+                "random_steps.seed",
+                self.random_steps.as_ref().and_then(|r| r.seed),
+            ),
+        ];
+        for (field, seed) in seeds {
+            if seed.is_some_and(|s| s > i64::MAX as u64) {
+                return Err(ConfigError::new(
+                    field,
+                    format!("must be at most {} (a TOML integer)", i64::MAX),
+                ));
+            }
+        }
         positive("log_rate", self.log_rate)?;
         if self.log_rate * self.physics_dt > 1.0 + 1e-9 {
             return Err(ConfigError::new(
