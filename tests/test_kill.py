@@ -96,8 +96,9 @@ def _check_outputs(out_dir: Path, old: dict[str, bytes]) -> tuple[int, int, int]
 @dataclass
 class KillTarget:
     """A command to kill: ``argv(tmp)`` builds its command line writing into ``tmp``;
-    ``runtime`` bounds its uninterrupted run [s]; ``interrupt`` sends SIGINT first (the
-    command writes its output on the way out) and kills during that write."""
+    ``runtime``: how long a serving command runs before its SIGINT [s]; ``interrupt`` sends
+    SIGINT first (the command writes its output on the way out) and kills during that
+    write. Other commands are killed at a seeded moment of their measured run time."""
 
     name: str
     argv: Callable[[Path, dict], list[str]]
@@ -125,6 +126,7 @@ def inputs(tmp_path_factory) -> dict:
     (d / "tiny.toml").write_text(TINY_EXPERIMENT)
     (d / "mission.toml").write_text("duration = 2.0\n[[step]]\nt = 0\nvn = 0\n")
     return {
+        "seed": "0",  # the kill runs use other seeds, so a new output differs from the old
         "flight": str(flight),
         "model": str(d / "model.json"),
         "experiment": str(d / "tiny.toml"),
@@ -141,7 +143,9 @@ def _free_port() -> int:
 KILL_TARGETS: list[KillTarget] = [
     KillTarget(
         "collect",
-        lambda out, inp: _swingrt("collect", "--duration", "120", "-o", str(out / "c.parquet")),
+        lambda out, inp: _swingrt(
+            "collect", "--duration", "120", "--seed", inp["seed"], "-o", str(out / "c.parquet")
+        ),
         runtime=3.0,
     ),
     KillTarget(
@@ -153,7 +157,9 @@ KILL_TARGETS: list[KillTarget] = [
     ),
     KillTarget(
         "experiment",
-        lambda out, inp: _swingrt("experiment", inp["experiment"], "--out", str(out)),
+        lambda out, inp: _swingrt(
+            "experiment", inp["experiment"], "--seed", inp["seed"], "--out", str(out)
+        ),
         runtime=6.0,
     ),
     KillTarget(
@@ -167,8 +173,10 @@ KILL_TARGETS: list[KillTarget] = [
 ]
 
 
-def _run_complete(target: KillTarget, out: Path, inputs: dict, timeout: float = 120.0) -> None:
-    """One uninterrupted run (SIGINT after ``runtime`` for the serving commands)."""
+def _run_complete(target: KillTarget, out: Path, inputs: dict, timeout: float = 120.0) -> float:
+    """One uninterrupted run (SIGINT after ``runtime`` for the serving commands); returns
+    its wall time [s]."""
+    t0 = time.monotonic()
     proc = subprocess.Popen(
         target.argv(out, inputs), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
     )
@@ -177,26 +185,30 @@ def _run_complete(target: KillTarget, out: Path, inputs: dict, timeout: float = 
         proc.send_signal(signal.SIGINT)
     text, _ = proc.communicate(timeout=timeout)
     assert proc.returncode == 0, text
+    return time.monotonic() - t0
 
 
 def _kill_loop(target: KillTarget, tmp_path: Path, inputs: dict) -> list[tuple[int, int, int]]:
     out = tmp_path / "out"
     out.mkdir()
-    _run_complete(target, out, inputs)  # the "old" complete outputs
+    took = _run_complete(target, out, inputs)  # the "old" complete outputs
     old = {p.name: p.read_bytes() for p in out.iterdir() if not p.name.startswith(".")}
     assert old, f"{target.name} wrote nothing"
     rng = random.Random(f"{SEED}-{target.name}")
     results = []
-    for _ in range(KILLS):
+    for i in range(KILLS):
         proc = subprocess.Popen(
-            target.argv(out, inputs), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+            target.argv(out, {**inputs, "seed": str(i + 1)}),
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
         )
         if target.interrupt:
             time.sleep(rng.uniform(1.0, target.runtime))
             proc.send_signal(signal.SIGINT)
-            time.sleep(rng.uniform(0.0, 0.3))  # inside the write on the way out
+            time.sleep(rng.uniform(0.0, 0.08))  # inside the write on the way out
         else:
-            time.sleep(rng.uniform(0.2, target.runtime))
+            # Over the second half of a run and just past its end: the writes are there.
+            time.sleep(rng.uniform(0.5, 1.05) * took)
         proc.kill()
         proc.wait(timeout=10)
         results.append(_check_outputs(out, old))
