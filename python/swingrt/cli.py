@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+from typing import NoReturn
 
 from swingrt.errors import SwingrtError
 
@@ -28,11 +29,20 @@ COMMANDS = (
 )
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line (and exit status 2), like every
+    other user mistake; ``--help`` still shows the usage."""
+
+    def error(self, message: str) -> NoReturn:
+        message = " ".join(message.split())
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Build the argument parser with every subcommand."""
     from swingrt import __version__
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="swingrt",
         description="Identify and damp the swing of an unknown suspended payload.",
     )
@@ -59,6 +69,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except FileNotFoundError as exc:
         print(f"swingrt: error: no such file: {exc.filename}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # a directory for a file, no permission, a full disk, ...
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"swingrt: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("swingrt: interrupted", file=sys.stderr)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import sys
 
 from swingrt.errors import ConfigError
@@ -58,12 +59,18 @@ def run(args) -> int:
     from swingrt.mavlink.link import connect
     from swingrt.mavlink.offboard import Mission, Watchdog, fly, load_controller
 
-    if not (args.acc_limit > 0):
-        raise ConfigError(f"--acc-limit must be positive, not {args.acc_limit}")
-    if args.budget is not None and not (args.budget > 0):
-        raise ConfigError(f"--budget must be positive, not {args.budget}")
-    if not (args.stale_factor >= 1):
-        raise ConfigError(f"--stale-factor must be >= 1, not {args.stale_factor}")
+    # Finite too: an infinite stale factor, budget or acceleration limit switches a safety
+    # net off, and an infinite --timeout waits for ever on a silent link.
+    if not (0 < args.acc_limit < math.inf):
+        raise ConfigError(f"--acc-limit must be a positive number, not {args.acc_limit}")
+    if args.budget is not None and not (0 < args.budget < math.inf):
+        raise ConfigError(f"--budget must be a positive number of ms, not {args.budget}")
+    if not (1 <= args.stale_factor < math.inf):
+        raise ConfigError(f"--stale-factor must be a number >= 1, not {args.stale_factor}")
+    if not (0 < args.timeout < math.inf):
+        raise ConfigError(f"--timeout must be a positive number of seconds, not {args.timeout}")
+    if args.system_id is not None and not (1 <= args.system_id <= 255):
+        raise ConfigError(f"--system-id must be 1..255, not {args.system_id}")
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
     mission = Mission.from_toml(args.mission) if args.mission else Mission.default()
     controller, ts, axes = load_controller(args.model)

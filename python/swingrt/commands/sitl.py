@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import sys
 
 from swingrt.errors import ConfigError
@@ -44,14 +45,14 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 def run(args) -> int:
     """Run the vehicle until SIGINT/SIGTERM (or --duration); the trace is flushed on exit."""
-    if not (args.speed > 0):
-        raise ConfigError(f"--speed must be positive, not {args.speed}")
+    if not (0 < args.speed < math.inf):
+        raise ConfigError(f"--speed must be a positive number, not {args.speed}")
     if not (0 < args.rate <= 1000):
         raise ConfigError(f"--rate must be in (0, 1000] Hz, not {args.rate}")
     if not (1 <= args.system_id <= 255):
         raise ConfigError(f"--system-id must be 1..255, not {args.system_id}")
-    if not (args.offboard_loss > 0):
-        raise ConfigError(f"--offboard-loss must be positive, not {args.offboard_loss}")
+    if not (0 < args.offboard_loss < math.inf):
+        raise ConfigError(f"--offboard-loss must be a positive number, not {args.offboard_loss}")
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
     from swingrt.mavlink.vehicle import run_vehicle
     from swingrt.scenario import resolve

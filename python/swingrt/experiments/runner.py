@@ -355,9 +355,11 @@ def run_experiment(
                 f"{case}: no searched model passed the closed-loop check; the least "
                 "violating one was flown"
             )
+        # An unscored model (test span shorter than the rollout) has test_nmae None.
+        test_nmae = model.diagnostics.get("test_nmae")
         notes.append(
             f"{case}: DMDc q = {model.delays}, p = {model.rank}, "
-            f"test NMAE {model.diagnostics.get('test_nmae', float('nan')):.4f}"
+            f"test NMAE {float('nan') if test_nmae is None else test_nmae:.4f}"
             + (f" ({len(cc['checked'])} candidate(s) flown in the closed-loop check)" if cc else "")
             + f"; white-box m_p = {lqr['m_p']:.3f} kg, l = {lqr['l']:.3f} m"
         )

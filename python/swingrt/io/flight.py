@@ -170,13 +170,16 @@ def load_flight(
         raise DataError(f"{p}: no such file", path=p)
     if p.stat().st_size == 0:
         raise DataError(f"{p}: file is empty", path=p)
-    if suffix == ".ulg":
-        from swingrt.io.ulog import load_ulog
+    # Hostile content (huge, non-finite, zero-norm quaternions) gives NaN/inf columns that
+    # `require` names, not numpy warnings.
+    with np.errstate(all="ignore"):
+        if suffix == ".ulg":
+            from swingrt.io.ulog import load_ulog
 
-        data = load_ulog(p, ulog_swing)
-    else:
-        data = _load_table(p, suffix)
-    _finish_time(data, str(p))
+            data = load_ulog(p, ulog_swing)
+        else:
+            data = _load_table(p, suffix)
+        _finish_time(data, str(p))
     if columns is not None:
         require(data, columns, str(p))
     return data
@@ -269,8 +272,12 @@ def _load_table(p: Path, suffix: str) -> Trace:
         raise DataError(f"{p}: cannot read {suffix[1:]} file: {first}", path=p) from None
     if table.num_rows == 0:
         raise DataError(f"{p}: file holds no rows", path=p)
+    try:
+        names = table.column_names
+    except UnicodeDecodeError:
+        raise DataError(f"{p}: the header is not UTF-8 text", path=p) from None
     out = Trace(source=str(p))
-    for name in table.column_names:
+    for name in names:
         col = table.column(name)
         if pa.types.is_integer(col.type) or pa.types.is_floating(col.type):
             out[name] = col.to_numpy(zero_copy_only=False).astype(float)
@@ -293,10 +300,18 @@ def _finish_time(data: Trace, source: str) -> None:
     if not np.all(np.isfinite(t)):
         i = int(np.argmax(~np.isfinite(t)))
         raise DataError(f"{source}: column t is not finite at row {i}", path=source)
-    dt = np.diff(t)
+    if not np.isfinite(t[-1] - t[0]):
+        raise DataError(
+            f"{source}: time spans more than a float can hold ({t[0]:.6g} to {t[-1]:.6g} s)",
+            path=source,
+        )
+    # Checked after the shift: times far from 0 (t = -1.4e14, then 0.02, 0.04) collapse
+    # onto one value when they are made relative to the first sample.
+    shifted = t - t[0]
+    dt = np.diff(shifted)
     if np.any(dt <= 0):
         i = int(np.argmax(dt <= 0)) + 1
         raise DataError(
             f"{source}: time does not increase at row {i} (t = {t[i]:.6g} s)", path=source
         )
-    data["t"] = t - t[0]
+    data["t"] = shifted

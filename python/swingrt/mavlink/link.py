@@ -155,6 +155,7 @@ def connect(
                 source_component=component_id,
             )
             conn.swingrt_url = url
+            _track_reads(conn)
             return conn
         conn = mavutil.mavlink_connection(
             device,
@@ -168,7 +169,32 @@ def connect(
     except (OSError, ValueError) as exc:
         raise LinkError(f"cannot open {url}: {exc}") from None
     conn.swingrt_url = url
+    _track_reads(conn)
     return conn
+
+
+def _track_reads(conn) -> None:
+    """Record how many bytes each read returned (``conn.swingrt_bytes_read``), so that a
+    reader can tell "nothing arrived" from "a datagram arrived that held no message" (pymavlink
+    returns None for both); on UDP, drop a partial frame left by an earlier datagram when a
+    new one arrives: a frame never spans datagrams, and a truncated one that declares a long
+    payload would otherwise swallow the good datagrams after it."""
+    inner = conn.recv
+    udp = isinstance(conn, mavutil.mavudp)
+
+    def recv(n=None):
+        data = inner() if n is None else inner(n)
+        conn.swingrt_bytes_read = len(data)
+        if data and udp:
+            mav = conn.mav
+            if 0 < mav.buf_len() < mav.expected_length:
+                mav.buf = bytearray()
+                mav.buf_index = 0
+                mav.expected_length = mavlink.HEADER_LEN_V1 + 2
+        return data
+
+    conn.swingrt_bytes_read = 0
+    conn.recv = recv
 
 
 def send_heartbeat(conn, *, onboard: bool = True) -> None:

@@ -41,7 +41,14 @@ from pathlib import Path
 import numpy as np
 
 from swingrt._core import Mpc
-from swingrt.errors import ConfigError, ControlError, FlightAbort, LinkError, ModelError
+from swingrt.errors import (
+    ConfigError,
+    ControlError,
+    FlightAbort,
+    LinkError,
+    ModelError,
+    SwingrtError,
+)
 from swingrt.io.flight import TRACE_COLUMNS, write_columns
 from swingrt.mavlink.link import (
     PX4_MAIN_MODE,
@@ -155,6 +162,24 @@ class Mission:
 
 # ----------------------------------------------------------------------------- telemetry
 
+#: Magnitude limits beyond which a telemetry message is dropped as absurd (not finite, or a
+#: corrupted value that passed the CRC): position [m] and velocity [m/s]; quaternion entries
+#: and the tolerance on its norm; swing angles [rad]; acceleration setpoints [m/s²].
+TELEMETRY_LIMITS: dict[str, tuple[float, ...]] = {
+    "LOCAL_POSITION_NED": (1e5, 100.0),
+    "ATTITUDE_QUATERNION": (1.5, 0.1),
+    "DEBUG_VECT": (math.pi,),
+    "POSITION_TARGET_LOCAL_NED": (100.0,),
+}
+
+#: A time stamp this far back (ms; µs for DEBUG_VECT) is a reboot, not a replay.
+REBOOT_JUMP: dict[str, int] = {
+    "LOCAL_POSITION_NED": 10_000,
+    "ATTITUDE_QUATERNION": 10_000,
+    "DEBUG_VECT": 10_000_000,
+    "POSITION_TARGET_LOCAL_NED": 10_000,
+}
+
 
 class Telemetry:
     """Newest vehicle state from MAVLink, with the local receive time of each part."""
@@ -171,10 +196,33 @@ class Telemetry:
         self.seen_offboard = False
         self.acks: list[tuple[int, int]] = []
         self.vehicle_sysid: int | None = None
+        #: Why the newest telemetry message of a kind was dropped (absurd values, replayed).
+        self.rejected: dict[str, str] = {}
+        self._stamp: dict[str, int] = {}
+
+    def _fresh(self, kind: str, stamp: int) -> bool:
+        """Drop a message not newer than the last accepted one of its kind (a replayed or
+        reordered packet); a jump back of more than 10 s is a vehicle reboot, accepted."""
+        last = self._stamp.get(kind)
+        if last is not None and stamp <= last and last - stamp < REBOOT_JUMP[kind]:
+            self.rejected[kind] = f"replayed or reordered (stamp {stamp} <= {last})"
+            return False
+        self._stamp[kind] = stamp
+        return True
+
+    def _sane(self, kind: str, values, limit: float) -> bool:
+        """Drop a message whose values are not finite or beyond ``limit`` in magnitude."""
+        if all(math.isfinite(v) and abs(v) <= limit for v in values):
+            return True
+        shown = ", ".join(f"{v:.6g}" for v in values)
+        self.rejected[kind] = f"absurd values ({shown}; limit {limit:g})"
+        return False
 
     def update(self, msg, now: float) -> None:
         kind = msg.get_type()
         if self.vehicle_sysid is not None and msg.get_srcSystem() != self.vehicle_sysid:
+            return
+        if kind in TELEMETRY_LIMITS and not self._check(kind, msg):
             return
         if kind == "LOCAL_POSITION_NED":
             self.pos = [msg.x, msg.y, msg.z]
@@ -205,6 +253,34 @@ class Telemetry:
             text = msg.text if isinstance(msg.text, str) else msg.text.decode("ascii", "replace")
             log.info("vehicle: %s", text.rstrip("\0"))
 
+    def _check(self, kind: str, msg) -> bool:
+        """Whether a telemetry message is sane and new (else noted in :attr:`rejected`)."""
+        limit = TELEMETRY_LIMITS[kind]
+        if kind == "LOCAL_POSITION_NED":
+            ok = self._sane(kind, (msg.x, msg.y, msg.z), limit[0]) and self._sane(
+                kind, (msg.vx, msg.vy, msg.vz), limit[1]
+            )
+            return ok and self._fresh(kind, msg.time_boot_ms)
+        if kind == "ATTITUDE_QUATERNION":
+            q = (msg.q1, msg.q2, msg.q3, msg.q4)
+            if not self._sane(kind, q, limit[0]):
+                return False
+            norm = math.sqrt(sum(v * v for v in q))
+            if abs(norm - 1.0) > limit[1]:
+                self.rejected[kind] = f"quaternion of norm {norm:.6g}, not 1"
+                return False
+            return self._fresh(kind, msg.time_boot_ms)
+        if kind == "DEBUG_VECT":
+            name = msg.name.decode("ascii", "replace") if isinstance(msg.name, bytes) else msg.name
+            if name.rstrip("\0") != "SWING":
+                return True
+            return self._sane(kind, (msg.x, msg.y), limit[0]) and self._fresh(kind, msg.time_usec)
+        # POSITION_TARGET_LOCAL_NED: only the acceleration is read (position/velocity may
+        # be NaN by design: the fields the type mask leaves out).
+        return self._sane(kind, (msg.afx, msg.afy, msg.afz), limit[0]) and self._fresh(
+            kind, msg.time_boot_ms
+        )
+
     def euler(self) -> tuple[float, float, float]:
         q0, q1, q2, q3 = self.q
         roll = math.atan2(2 * (q0 * q1 + q2 * q3), 1 - 2 * (q1 * q1 + q2 * q2))
@@ -227,10 +303,15 @@ class Watchdog:
     def check_inputs(self, tel: Telemetry, now: float) -> str | None:
         """Reason to abort before computing, or None."""
         limit = self.stale_factor * self.ts
-        for name, t in (("LOCAL_POSITION_NED", tel.t_pos), ("DEBUG_VECT SWING", tel.t_swing)):
+        for name, kind, t in (
+            ("LOCAL_POSITION_NED", "LOCAL_POSITION_NED", tel.t_pos),
+            ("DEBUG_VECT SWING", "DEBUG_VECT", tel.t_swing),
+        ):
             if now - t > limit:
                 age, lim = (now - t) * 1e3, limit * 1e3
-                return f"stale telemetry: {name} is {age:.0f} ms old (limit {lim:.0f} ms)"
+                why = tel.rejected.get(kind)
+                dropped = f"; last one dropped: {why}" if why else ""
+                return f"stale telemetry: {name} is {age:.0f} ms old (limit {lim:.0f} ms{dropped})"
         if now - tel.t_heartbeat > self.link_timeout:
             return f"dead link: no heartbeat for {now - tel.t_heartbeat:.1f} s"
         return None
@@ -291,6 +372,10 @@ class FlightReport:
 NODE_COLUMNS = (*TRACE_COLUMNS, "jitter_s", "compute_s")
 
 
+#: Most messages read per drain (one tick); the rest wait in the socket (or are dropped by it).
+MAX_DRAIN = 500
+
+
 class OffboardSession:
     """One offboard flight over an open connection: handshake, fixed-rate loop, handback.
 
@@ -332,13 +417,17 @@ class OffboardSession:
 
     def _drain(self) -> None:
         now = time.monotonic()
-        while True:
+        for _ in range(MAX_DRAIN):  # bounded: a flood cannot starve the control loop
             try:
-                msg = self.conn.recv_match(blocking=False)
+                msg = self.conn.recv_msg()
             except Exception as exc:  # garbage on the wire: drop, keep flying
                 log.warning("dropped unparsable input (%s)", exc)
                 continue
             if msg is None:
+                # A datagram of garbage parses to nothing too: read on unless the link was
+                # empty (else one bad datagram would hold the good ones back a whole tick).
+                if getattr(self.conn, "swingrt_bytes_read", 0) > 0:
+                    continue
                 break
             self.tel.update(msg, now)
         if now >= self._next_beat:
@@ -454,7 +543,11 @@ class OffboardSession:
                 if k == 0:
                     rate = (0.0, 0.0)
                 prev_swing = list(sw)
-                mask, pos, vel, acc, ref = policy(k, k * self.ts, self.tel, rate)
+                try:
+                    mask, pos, vel, acc, ref = policy(k, k * self.ts, self.tel, rate)
+                except SwingrtError as exc:  # the controller refused the state: fail safe
+                    aborted = f"controller error: {exc} at t = {k * self.ts:.2f} s"
+                    break
                 self._setpoint(mask, pos, vel, acc)
                 compute = time.perf_counter() - c0
                 self._log(cols, k, jitter, compute, rate, acc, ref)
@@ -466,7 +559,10 @@ class OffboardSession:
         finally:
             self._hand_back(emergency=aborted is not None)
         n = min(k, n_max)
-        out = {c: v[:n] for c, v in cols.items()}
+        # Rows of skipped (missed) deadlines were never logged: leave them out, so the trace
+        # has a strictly increasing, finite t (with a gap) instead of NaN rows.
+        logged = np.isfinite(cols["t"][:n])
+        out = {c: v[:n][logged] for c, v in cols.items()}
         ok = np.isfinite(out["jitter_s"])
         report = FlightReport(
             ts=self.ts,

@@ -413,6 +413,10 @@ class Vehicle:
                     self._warn("bad_data", f"dropped unparsable input ({exc})")
                     continue
                 if msg is None:
+                    # A datagram of garbage parses to nothing too: read on unless the
+                    # link was empty (see ``link._track_reads``).
+                    if getattr(conn, "swingrt_bytes_read", 0) > 0:
+                        continue
                     break
                 self.handle(msg, conn, now)
 

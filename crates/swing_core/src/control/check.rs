@@ -16,6 +16,10 @@ use crate::control::{
 };
 use crate::sysid::LinearModel;
 
+/// Most controller ticks one check may fly (a 20 s check at 30 ms is 667): a huge
+/// `duration` or a tiny model `dt` is refused instead of looping for hours.
+pub const MAX_CHECK_TICKS: usize = 1_000_000;
+
 /// Scenario of a closed-loop step check.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepCheckSettings {
@@ -143,7 +147,18 @@ pub fn step_check_with(
     let mut lin = LinearPlant::new(plant)?;
     let m = lin.axes();
     let dt = plant.dt;
-    let ticks = (check.duration / dt).round() as usize;
+    let ticks_f = (check.duration / dt).round();
+    if ticks_f.is_nan() || ticks_f > MAX_CHECK_TICKS as f64 {
+        return Err(ConfigError::new(
+            "duration",
+            format!(
+                "{} s at dt = {dt} s is more than {MAX_CHECK_TICKS} ticks",
+                check.duration
+            ),
+        )
+        .into());
+    }
+    let ticks = ticks_f as usize;
     let step_tick = (check.t_step / dt).round() as usize;
     let lag = if check.input_lag > 0.0 {
         (-dt / check.input_lag).exp()

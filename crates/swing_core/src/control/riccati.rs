@@ -179,8 +179,10 @@ pub fn care(
         )));
     }
     let acl = a - b * &k;
-    let max_re = acl
-        .complex_eigenvalues()
+    let max_re = eigenvalues(&acl)
+        .ok_or_else(|| {
+            ControlError::Synthesis("CARE: closed-loop eigenvalues did not converge".into())
+        })?
         .iter()
         .map(|l| l.re)
         .fold(f64::NEG_INFINITY, f64::max);
@@ -283,8 +285,10 @@ pub fn dare_with_cross(
         )));
     }
     let acl = a - b * &k;
-    let rho = acl
-        .complex_eigenvalues()
+    let rho = eigenvalues(&acl)
+        .ok_or_else(|| {
+            ControlError::Synthesis("DARE: closed-loop eigenvalues did not converge".into())
+        })?
         .iter()
         .map(|l| l.norm())
         .fold(0.0, f64::max);
@@ -296,6 +300,32 @@ pub fn dare_with_cross(
     Ok(RiccatiSolution { k, p, residual })
 }
 
+/// Largest entry magnitude [`expm`] accepts. nalgebra's `exp` squares 2^s times with s from
+/// a norm of A⁸ or A¹⁰; entries near 1e31 overflow that norm to ∞, s saturates to u64::MAX
+/// and the call never returns. A physical model scaled by a sample time is nowhere near.
+pub const EXPM_MAX_ENTRY: f64 = 1e15;
+
+/// Matrix exponential, or `None` for a matrix with a non-finite or huge entry (see
+/// [`EXPM_MAX_ENTRY`]) instead of nalgebra's endless squaring.
+pub fn expm(m: &DMatrix<f64>) -> Option<DMatrix<f64>> {
+    if m.iter().all(|v| v.is_finite() && v.abs() <= EXPM_MAX_ENTRY) {
+        Some(m.exp())
+    } else {
+        None
+    }
+}
+
+/// Eigenvalues of a square matrix, or `None` when it has a non-finite entry or the Schur
+/// iteration does not converge within a bounded number of sweeps (nalgebra's
+/// `complex_eigenvalues` loops without bound on some badly scaled inputs).
+pub fn eigenvalues(m: &DMatrix<f64>) -> Option<Vec<nalgebra::Complex<f64>>> {
+    if !m.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    let schur = nalgebra::linalg::Schur::try_new(m.clone(), f64::EPSILON, 10_000)?;
+    Some(schur.complex_eigenvalues().iter().copied().collect())
+}
+
 /// Zero-order-hold discretisation of ẋ = Ax + Bu over `dt`: (A_d, B_d) = blocks of
 /// exp([A B; 0 0] dt).
 pub fn c2d_zoh(a: &DMatrix<f64>, b: &DMatrix<f64>, dt: f64) -> (DMatrix<f64>, DMatrix<f64>) {
@@ -304,7 +334,8 @@ pub fn c2d_zoh(a: &DMatrix<f64>, b: &DMatrix<f64>, dt: f64) -> (DMatrix<f64>, DM
     let mut f = DMatrix::<f64>::zeros(n + m, n + m);
     f.view_mut((0, 0), (n, n)).copy_from(a);
     f.view_mut((0, n), (n, m)).copy_from(b);
-    let e = (f * dt).exp();
+    // Out of range (see `expm`): NaN blocks, which every caller's finiteness check refuses.
+    let e = expm(&(f * dt)).unwrap_or_else(|| DMatrix::from_element(n + m, n + m, f64::NAN));
     (
         e.view((0, 0), (n, n)).into_owned(),
         e.view((0, n), (n, m)).into_owned(),
@@ -341,7 +372,11 @@ pub fn sampled_lqr(
     big.view_mut((0, 0), (nm, nm)).copy_from(&(-f.transpose()));
     big.view_mut((0, nm), (nm, nm)).copy_from(&qc);
     big.view_mut((nm, nm), (nm, nm)).copy_from(&f);
-    let e = (big * dt).exp();
+    let e = expm(&(big * dt)).ok_or_else(|| {
+        ControlError::Model(format!(
+            "sampled LQR: model × period has entries beyond {EXPM_MAX_ENTRY:e} or non-finite ones"
+        ))
+    })?;
     let e12 = e.view((0, nm), (nm, nm)).into_owned();
     let e22 = e.view((nm, nm), (nm, nm)).into_owned();
     let mut w = e22.transpose() * e12;

@@ -94,6 +94,9 @@ pub struct Simulator {
     row: Vec<f64>,
 }
 
+/// Trace rows reserved when a simulator is built (the rest grow on demand).
+const PREALLOCATED_ROWS: usize = 360_001;
+
 impl Simulator {
     /// Build a simulator at trimmed hover from a scenario (validated here).
     pub fn new(sc: Scenario) -> Result<Self, SimError> {
@@ -129,7 +132,8 @@ impl Simulator {
         if sc.payload.kind == PayloadKind::Double {
             names.extend(DOUBLE_COLUMNS);
         }
-        let rows = (sc.duration * sc.log_rate).ceil() as usize + 1;
+        // Reserve at most an hour at 100 Hz up front; a longer trace grows as it is logged.
+        let rows = ((sc.duration * sc.log_rate).ceil() as usize + 1).min(PREALLOCATED_ROWS);
         let schedule = sc.schedule();
         let wind = Wind::new(sc.wind.clone(), sc.seed);
         let acc_bias = Vector3::new(sc.noise.acc_sp_bias[0], sc.noise.acc_sp_bias[1], 0.0);

@@ -240,6 +240,14 @@ impl RandomSteps {
     }
 }
 
+/// Longest scenario [s] (a day): beyond it a typo (`duration = 4294967296`) would ask for a
+/// trace of terabytes and a run of centuries, so it is refused by name instead.
+pub const MAX_DURATION: f64 = 86_400.0;
+
+/// Most random steps a schedule may draw; `random_steps.interval_min` is refused when the
+/// duration would need more (a near-zero hold time would otherwise never end the loop).
+pub const MAX_RANDOM_STEPS: f64 = 1e6;
+
 /// A complete simulation scenario.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -396,7 +404,30 @@ impl Scenario {
     /// Check physical sense of every section; the error names the field by dotted path.
     pub fn validate(&self) -> Result<(), ConfigError> {
         positive("duration", self.duration)?;
+        if self.duration > MAX_DURATION {
+            return Err(ConfigError::new(
+                "duration",
+                format!("must be at most {MAX_DURATION} s (got {})", self.duration),
+            ));
+        }
         in_range("physics_dt", self.physics_dt, 1e-5, 0.01)?;
+        // TOML integers are i64: a larger seed would write a scenario TOML (reports,
+        // reproducibility) that cannot be read back.
+        let seeds = [
+            ("seed", Some(self.seed)),
+            (
+                "random_steps.seed",
+                self.random_steps.as_ref().and_then(|r| r.seed),
+            ),
+        ];
+        for (field, seed) in seeds {
+            if seed.is_some_and(|s| s > i64::MAX as u64) {
+                return Err(ConfigError::new(
+                    field,
+                    format!("must be at most {} (a TOML integer)", i64::MAX),
+                ));
+            }
+        }
         positive("log_rate", self.log_rate)?;
         if self.log_rate * self.physics_dt > 1.0 + 1e-9 {
             return Err(ConfigError::new(
@@ -434,6 +465,16 @@ impl Scenario {
         }
         if let Some(r) = &self.random_steps {
             r.validate().map_err(|e| e.within("random_steps"))?;
+            let draws = (self.duration - r.start).max(0.0) / r.interval_min;
+            if draws > MAX_RANDOM_STEPS {
+                return Err(ConfigError::new(
+                    "random_steps.interval_min",
+                    format!(
+                        "{} s draws about {draws:.0} steps over {} s, more than {MAX_RANDOM_STEPS}",
+                        r.interval_min, self.duration
+                    ),
+                ));
+            }
         }
         Ok(())
     }

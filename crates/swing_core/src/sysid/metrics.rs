@@ -48,11 +48,13 @@ pub fn start_points(
         ));
     }
     let lo = q.max(1) - 1;
-    if len < lo + horizon + 1 {
+    // Checked: a rollout of 1e300 s is `usize::MAX` samples, and the sum would wrap.
+    let need = lo.checked_add(horizon).and_then(|v| v.checked_add(1));
+    if need.is_none_or(|need| len < need) {
         return Err(data(format!(
             "test data of {len} samples is too short for {q} delays and a {horizon}-step horizon \
              (need at least {})",
-            lo + horizon + 1
+            lo.saturating_add(horizon).saturating_add(1)
         )));
     }
     let hi = len - 1 - horizon;

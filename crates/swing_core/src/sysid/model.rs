@@ -15,6 +15,22 @@ use super::error::{model, SysidError};
 /// The schema tag of a model file.
 pub const MODEL_FORMAT: &str = "swingrt-model/1";
 
+/// Largest stacked state n·q a model may declare. The thesis's search tops out at q = 58
+/// over six states (348); a file declaring more (`"delays": 18446744073709551615`) is
+/// refused before its dimensions are multiplied or anything is allocated for them.
+pub const MAX_MODEL_ORDER: usize = 4096;
+
+/// n·q when it is within [`MAX_MODEL_ORDER`], else the error naming both.
+pub fn model_order(n: usize, q: usize) -> Result<usize, SysidError> {
+    n.checked_mul(q)
+        .filter(|nz| *nz <= MAX_MODEL_ORDER)
+        .ok_or_else(|| {
+            model(format!(
+                "{n} states × {q} delays exceeds the largest model order {MAX_MODEL_ORDER}"
+            ))
+        })
+}
+
 /// How the constant offset of the input channel is handled (thesis 4.6.6).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -192,7 +208,7 @@ impl LinearModel {
 
     /// Dimension of the stacked state n·q.
     pub fn order(&self) -> usize {
-        self.n() * self.delays
+        self.n().saturating_mul(self.delays)
     }
 
     /// This model with a linear vehicle drag of `k` [1/s] on each horizontal velocity
@@ -239,7 +255,7 @@ impl LinearModel {
         if q == 0 {
             return Err(model("delays must be at least 1"));
         }
-        let nz = n * q;
+        let nz = model_order(n, q)?;
         if self.a.shape() != (nz, nz) {
             return Err(model(format!(
                 "A is {}×{}, expected {nz}×{nz} (states × delays)",
@@ -323,7 +339,7 @@ impl LinearModel {
             )));
         }
         let (n, m, q) = (file.states.len(), file.inputs.len(), file.delays);
-        let nz = n * q;
+        let nz = model_order(n, q)?;
         let a = matrix_from("A", &file.a, nz, nz)?;
         let b = matrix_from("B", &file.b, nz, m)?;
         let out = LinearModel {
@@ -372,7 +388,7 @@ impl LinearModel {
     /// predicted state rows x_{k+1..k+H} (time-major).
     pub fn predict(&self, history: &[f64], inputs: &[f64]) -> Result<Vec<f64>, SysidError> {
         let (n, m, q) = (self.n(), self.m(), self.delays);
-        if history.len() != n * q {
+        if Some(history.len()) != n.checked_mul(q) {
             return Err(super::error::data(format!(
                 "history has {} values, expected the last {q} rows of {n} states",
                 history.len()

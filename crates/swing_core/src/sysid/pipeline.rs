@@ -259,6 +259,13 @@ pub fn identify(
     if search_result.is_none() {
         score(&mut model, &test, settings)?;
     }
+    // Finite data can still give a non-finite model (values near f64::MAX overflow the
+    // input mean or the offset): refuse it here rather than hand on a model no one can use.
+    model.validate().map_err(|e| {
+        SysidError::Identification(format!(
+            "the data gave no usable model ({e}); are the values in SI units?"
+        ))
+    })?;
     Ok(Identified {
         model,
         search: search_result,

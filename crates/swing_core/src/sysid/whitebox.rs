@@ -183,6 +183,12 @@ pub fn axis_delay_rows(
         return Err(config(format!("dt must be positive, not {dt}")));
     }
     let (ad, bd) = params.discrete(dt);
+    if !ad.iter().chain(bd.iter()).all(|v| v.is_finite()) {
+        return Err(SysidError::Identification(format!(
+            "the white-box model does not discretise over dt = {dt} s (masses, length and \
+             friction out of range)"
+        )));
+    }
     let ad_inv = ad
         .clone()
         .try_inverse()

@@ -221,7 +221,9 @@ fn check_model(model: &LinearModel) -> Result<(usize, usize, usize), ControlErro
     if !(1..=2).contains(&m) {
         return bad(format!("model must have 1 or 2 inputs (axes), got {m}"));
     }
-    let nz = n * q;
+    let Some(nz) = n.checked_mul(q) else {
+        return bad(format!("{n} states × {q} delays overflows"));
+    };
     if model.a.shape() != (nz, nz) {
         return bad(format!(
             "A must be {nz}×{nz} (states × delays), got {:?}",
