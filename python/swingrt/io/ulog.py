@@ -32,6 +32,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -126,6 +127,19 @@ def load_ulog(p: Path, ulog_swing: Mapping | None = None) -> Trace:
     except Exception as exc:  # pyulog raises bare Exception / struct.error on bad files
         raise DataError(f"{p}: not a readable ULog file ({exc})", path=p) from None
 
+    try:
+        return _trace_from_ulog(p, log, swing, explicit_swing)
+    except DataError:
+        raise
+    except (KeyError, IndexError, ValueError, TypeError, OverflowError) as exc:
+        # A corrupted file can parse into topics without the fields PX4 always writes.
+        raise DataError(
+            f"{p}: malformed ULog content ({type(exc).__name__}: {exc})", path=p
+        ) from None
+
+
+def _trace_from_ulog(p: Path, log: Any, swing: dict, explicit_swing: bool) -> Trace:
+    """The trace columns of a parsed ULog (see :func:`load_ulog`)."""
     topics: dict[str, list] = {}
     for d in log.data_list:
         topics.setdefault(d.name, []).append(d)
