@@ -1,4 +1,4 @@
-"""Hostile input (issue 13): property tests of the flight loaders and the command line.
+"""Hostile input: property tests of the flight loaders and the command line.
 
 Loaders: a CSV, Parquet or ULog file that is truncated, corrupted, empty, wrong-typed, has
 duplicated or non-monotonic timestamps or gigantic values either loads (time finite, strictly

@@ -1,4 +1,4 @@
-"""Nothing lost (issue 13): SIGKILL at seeded random moments, repeatedly.
+"""Nothing lost: SIGKILL at seeded random moments, repeatedly.
 
 For ``collect``, ``identify``, ``experiment``, ``sitl --log`` and ``fly --log``: every output
 file is afterwards either the complete old file (left from an earlier complete run), a

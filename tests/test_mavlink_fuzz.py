@@ -1,4 +1,4 @@
-"""MAVLink fault injection (issue 13): ``swingrt fly`` against ``swingrt sitl`` through a
+"""MAVLink fault injection: ``swingrt fly`` against ``swingrt sitl`` through a
 hostile loopback proxy.
 
 The node connects to the proxy, the proxy to the vehicle; both run as real subprocesses in
@@ -361,7 +361,7 @@ class _QuietConn:
 
 
 def test_skipped_deadlines_leave_no_nan_rows(tmp_path):
-    """Known bug (issue 13): rows of missed deadlines stayed NaN in the node's trace, and
+    """Regression: rows of missed deadlines stayed NaN in the node's trace, and
     ``load_flight`` refused its non-finite ``t``. They are left out now."""
     from swingrt.mavlink.offboard import OffboardSession, Watchdog
 

@@ -1,4 +1,4 @@
-//! Fuzz targets of `swing_core` (issue 13): every parser and numeric entry point that takes
+//! Fuzz targets of `swing_core`: every parser and numeric entry point that takes
 //! user input. Each target takes raw bytes and must return normally for every input: a
 //! typed error or a valid result is fine, a panic, an abort, an unbounded allocation or a
 //! hang is a finding. The same functions are driven by libFuzzer (`fuzz_targets/`, nightly)

@@ -1,4 +1,4 @@
-//! Regression tests for the fuzz findings of issue 13 (`fuzz/`): each input once made the
+//! Regression tests for the fuzz findings (`fuzz/`): each input once made the
 //! core panic, hang or allocate without bound; now each is a typed error.
 
 use nalgebra::{DMatrix, DVector};
