@@ -452,15 +452,7 @@ pub fn coarse_to_fine(
     };
     let second = grid_search(train, test, &fine, settings)?;
     // Report both stages; the fine one can only improve on the coarse winner's neighbourhood.
-    let mut table = first.table;
-    let offset = table.len();
-    table.extend(second.table);
-    let (best, model) = if second.model.diagnostics.test_nmae <= first.model.diagnostics.test_nmae {
-        (offset + second.best, second.model)
-    } else {
-        (first.best, first.model)
-    };
-    Ok(SearchResult { table, best, model })
+    Ok(merge_stages(first, second))
 }
 
 /// The default search, in two stages.
@@ -521,6 +513,12 @@ pub fn refine(
         .map(|(q, w)| (q, RankChoice::Windows(w)))
         .collect();
     let second = search_plan(train, test, &plan, settings)?;
+    Ok(merge_stages(first, second))
+}
+
+/// Both stages' candidates in one table; the better stage's winner is selected (the second
+/// on a tie).
+fn merge_stages(first: SearchResult, second: SearchResult) -> SearchResult {
     let mut table = first.table;
     let offset = table.len();
     table.extend(second.table);
@@ -529,5 +527,5 @@ pub fn refine(
     } else {
         (first.best, first.model)
     };
-    Ok(SearchResult { table, best, model })
+    SearchResult { table, best, model }
 }
