@@ -24,6 +24,7 @@ COMMANDS = (
     "experiment",
     "campaign",
     "sitl",
+    "hil",
     "fly",
     "bench",
 )

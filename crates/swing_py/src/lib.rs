@@ -8,6 +8,7 @@ use pyo3::prelude::*;
 mod control;
 mod convert;
 mod errors;
+mod hil;
 mod sim;
 mod sysid;
 
@@ -17,6 +18,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("GRAVITY", swing_core::plant::GRAVITY)?;
     sim::register(m)?;
+    hil::register(m)?;
     sysid::register(m)?;
     control::register(m)?;
     Ok(())

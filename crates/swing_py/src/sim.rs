@@ -13,7 +13,8 @@ use swing_core::ConfigError;
 use crate::errors::to_py;
 use crate::sysid::PyLinearModel;
 
-fn trace_to_dict<'py>(py: Python<'py>, trace: Trace) -> PyResult<Bound<'py, PyDict>> {
+/// A core trace as a dict of numpy columns.
+pub fn trace_to_dict<'py>(py: Python<'py>, trace: Trace) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     for (name, col) in trace.into_columns() {
         d.set_item(name, col.into_pyarray(py))?;

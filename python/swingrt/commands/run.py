@@ -19,6 +19,20 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--out", default="report", help="report folder (default: report)")
     p.add_argument("--seed", type=int, default=0, help="seed of the flights")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.add_argument(
+        "--px4",
+        metavar="DIR",
+        help="run the comparison on PX4 SITL from this build folder, swingrt's physics in "
+        "the loop (`swingrt hil`): PX4's ULog is the training data, PID is PX4's own",
+    )
+    p.add_argument("--instance", type=int, default=0, help="PX4 instance with --px4")
+    p.add_argument(
+        "--training",
+        type=float,
+        default=300.0,
+        metavar="S",
+        help="training flight length with --px4 (default 300 s)",
+    )
     return p
 
 
@@ -29,6 +43,24 @@ def run(args) -> int:
 
     from swingrt.experiments import Experiment, run_experiment
 
+    if args.px4:
+        from swingrt.hil.pipeline import run_on_px4
+
+        rows = run_on_px4(
+            args.px4,
+            args.out,
+            seed=args.seed,
+            instance=args.instance,
+            training=args.training,
+            quiet=args.quiet,
+        )
+        print((Path(args.out) / "metrics.md").read_text(encoding="utf-8"))
+        pid = next(r for r in rows if r["controller"] == "pid")
+        mpc = next(r for r in rows if r["controller"] == "mpc")
+        ratio = mpc["swing_excess_iae_deg_s"] / max(pid["swing_excess_iae_deg_s"], 1e-12)
+        print(f"MPC swing IAE above the momentum floor is {ratio:.3f}× PX4 PID's")
+        print(f"report: {args.out}/ (metrics, figures, traces, model, PX4 ULogs)")
+        return 0
     exp = Experiment(
         name="default-step",
         description="Honeybee with 0.2 kg on 1 m: 2 m/s North velocity step at t = 2 s "

@@ -21,6 +21,10 @@ normalised) so that yaw does not jump at +-pi. A topic that falls silent for lon
 ``max(0.5 s, 10 x its median period)`` leaves NaN inside the hole instead of a straight
 line, so that :func:`require` reports the gap with its time.
 
+Flight segment: when ``vehicle_status`` shows OFFBOARD flight of at least 10 s, the trace is
+cropped to the longest such stretch (the training flight flown by the offboard computer;
+boot, take-off and hover around it are not identification data); ``meta["segment"]`` says so.
+
 Swing sensor: ``ulog_swing = {"topic": "debug_vect", "name": "SWING", "n": "x", "e": "y",
 "scale": 1.0, "offset": 0.0}`` (the default; ``name`` filters the rows of a ``debug_vect``
 topic by its ``name`` field, our DEBUG_VECT convention documented in docs/flying.md).
@@ -102,6 +106,31 @@ def _interp_topic(t_base: np.ndarray, t_src: np.ndarray, y: np.ndarray) -> np.nd
         for k in np.flatnonzero(dt > limit):
             out[(t_base > t_src[k]) & (t_base < t_src[k + 1])] = np.nan
     return out
+
+
+#: PX4's navigation state while an offboard computer flies (vehicle_status.nav_state).
+NAV_STATE_OFFBOARD = 14
+#: Shortest OFFBOARD stretch [s] taken as the flight to identify from.
+MIN_OFFBOARD_SECONDS = 10.0
+
+
+def _offboard_segment(status) -> tuple[float, float] | None:
+    """The longest stretch of OFFBOARD flight in ``vehicle_status`` [µs], if it lasts
+    at least :data:`MIN_OFFBOARD_SECONDS`: a PX4 log holds boot, take-off and hover around
+    the training flight, and only the flight itself is identification data."""
+    if status is None:
+        return None
+    t, fields = status
+    if "nav_state" not in fields or len(t) < 2:
+        return None
+    on = np.asarray(fields["nav_state"]) == NAV_STATE_OFFBOARD
+    if not on.any():
+        return None
+    edges = np.diff(np.r_[0, on.astype(np.int8), 0])
+    starts, ends = np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0] - 1
+    best = int(np.argmax(t[ends] - t[starts]))
+    lo, hi = float(t[starts[best]]), float(t[ends[best]])
+    return (lo, hi) if hi - lo >= MIN_OFFBOARD_SECONDS * 1e6 else None
 
 
 def load_ulog(p: Path, ulog_swing: Mapping | None = None) -> Trace:
@@ -254,11 +283,19 @@ def _trace_from_ulog(p: Path, log: Any, swing: dict, explicit_swing: bool) -> Tr
     # Crop the base timeline to where every loaded topic has data (no extrapolation).
     lo = max([t_pos[0]] + [s[0][0] for s in sources])
     hi = min([t_pos[-1]] + [s[0][-1] for s in sources])
+    segment = _offboard_segment(topic("vehicle_status"))
+    if segment is not None:
+        lo, hi = max(lo, segment[0]), min(hi, segment[1])
     keep = (t_pos >= lo) & (t_pos <= hi)
     if keep.sum() < 2:
         raise DataError(f"{p}: the logged topics do not overlap in time", path=p)
     t_base = t_pos[keep]
     out = Trace(source=str(p), notes=notes)
+    if segment is not None:
+        out.meta["segment"] = (
+            f"the longest OFFBOARD stretch, {segment[0] * 1e-6:.1f}–{segment[1] * 1e-6:.1f} s "
+            "of PX4's clock"
+        )
     out["t"] = (t_base - t_base[0]) * 1e-6
     pos_fields = zip(
         ("pn", "pe", "pd", "vn", "ve", "vd"), ("x", "y", "z", "vx", "vy", "vz"), strict=True

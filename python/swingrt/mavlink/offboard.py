@@ -459,6 +459,9 @@ class OffboardSession:
             0.0,
         )
 
+    def _drop_acks(self, command: int) -> None:
+        self.tel.acks[:] = [a for a in self.tel.acks if a[0] != command]
+
     def _take_ack(self, command: int) -> int | None:
         for i, (cmd, result) in enumerate(self.tel.acks):
             if cmd == command:
@@ -590,6 +593,7 @@ class OffboardSession:
         tries = 0
         next_try = 0.0
         give_up = time.monotonic() + 5.0
+        self._drop_acks(mavlink.MAV_CMD_DO_SET_MODE)
         while True:
             now = time.monotonic()
             self._drain()
@@ -613,23 +617,32 @@ class OffboardSession:
         if not hasattr(self, "alt_hold"):
             return  # never engaged
         main, sub = self.hold
-        deadline = time.monotonic() + 2.0
+        deadline = time.monotonic() + 3.0
         next_try = 0.0
+        accepted = False
         try:
+            # PX4 acknowledges a mode command on every link it came in on, so acks of the
+            # OFFBOARD request can still be queued: only an ack that follows our request
+            # counts, and the hand-back is done when the heartbeat shows the hold mode.
+            self._drain()
+            self._drop_acks(mavlink.MAV_CMD_DO_SET_MODE)
+            self.tel.mode = None
             while time.monotonic() < deadline:
                 now = time.monotonic()
-                self._drain()
+                if now >= next_try:
+                    self._request_mode(main, sub)
+                    next_try = now + 0.3
                 # zero velocity = PX4's own velocity hold: safe whatever the swing state
                 self._setpoint(
                     MASK_VEL_ALT_HOLD, (0.0, 0.0, self.alt_hold), (0.0, 0.0, 0.0), (0.0,) * 3
                 )
-                if self._take_ack(mavlink.MAV_CMD_DO_SET_MODE) == mavlink.MAV_RESULT_ACCEPTED:
-                    log.info("handed back to %s", mode_name(main, sub))
-                    return
-                if now >= next_try:
-                    self._request_mode(main, sub)
-                    next_try = now + 0.3
                 time.sleep(self.ts)
+                self._drain()
+                if self._take_ack(mavlink.MAV_CMD_DO_SET_MODE) == mavlink.MAV_RESULT_ACCEPTED:
+                    accepted = True
+                if accepted and self.tel.mode is not None and self.tel.mode[0] != OFFBOARD_MAIN:
+                    log.info("handed back to %s", mode_name(*self.tel.mode))
+                    return
             log.warning(
                 "no ack for %s; PX4's offboard-loss failsafe takes over", mode_name(main, sub)
             )

@@ -23,7 +23,7 @@ from swingrt.mavlink.offboard import (
 )
 from swingrt.scenario import Scenario
 
-__all__ = ["random_step_mission", "collect_over_mavlink"]
+__all__ = ["random_step_mission", "collect_over_mavlink", "fly_velocity_mission"]
 
 
 def random_step_mission(
@@ -76,6 +76,23 @@ def collect_over_mavlink(
     Returns the :class:`FlightReport`.
     """
     mission = random_step_mission(duration, seed, axes=axes)
+    return fly_velocity_mission(
+        url, mission, out=out, sample_time=sample_time, system_id=system_id, **session_options
+    )
+
+
+def fly_velocity_mission(
+    url: str,
+    mission: Mission,
+    *,
+    out,
+    sample_time: float = 0.01,
+    system_id: int | None = None,
+    **session_options,
+):
+    """Fly ``mission``'s velocity steps under PX4's own velocity control (the PID
+    baseline; the training flight) and write the record to ``out`` (as
+    :func:`collect_over_mavlink`)."""
     conn = connect(url)
     try:
         # Telemetry comes at ~100 Hz: at a 10 ms loop, 3 Ts would trip on one late packet;

@@ -1,11 +1,13 @@
 //! Closed-loop simulation: scenario files, the multi-rate runner and traces.
 
+pub mod hil;
 pub mod runner;
 pub mod scenario;
 mod supervisor;
 mod ticker;
 pub mod trace;
 
+pub use hil::{HilPlant, HilSettings, SensorFrame};
 pub use runner::{SimError, Simulator};
 pub use scenario::{Axes, NoiseParams, RandomSteps, Scenario, SetpointEntry};
 pub use trace::{StateExtras, Trace, TraceRow, FLIGHT_COLUMNS, STATE_KEYS, TRACE_COLUMNS};

@@ -1,0 +1,177 @@
+"""``swingrt run --px4 DIR``: the main job on real PX4 firmware with swingrt's physics.
+
+As ``swingrt run`` on the built-in simulator, with PX4 in the loop of every flight:
+
+1. training flight: PX4 SITL + ``swingrt hil`` (its own process), take-off, then the
+   table-4.1 random velocity steps through PX4's offboard *velocity* setpoints (PX4's velocity
+   PID flies them); PX4 is shut down and its ULog kept;
+2. identification from **PX4's own ULog** (the OFFBOARD stretch of it), with the search and
+   the closed-loop check of ``swingrt identify --search``;
+3. a fresh PX4 session flies the default 2 m/s North step twice: PX4's velocity control (the
+   PID baseline) and the MPC on the identified model (acceleration setpoints);
+4. the report folder: ``metrics.csv`` / ``metrics.md`` with the columns of ``swingrt run``,
+   one Parquet trace per controller (the offboard node's view, named as ``swingrt run``
+   names them), the physics traces, the figures, the model and both PX4 ULogs.
+"""
+
+from __future__ import annotations
+
+import shutil
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from swingrt.errors import ConfigError
+
+__all__ = ["run_on_px4", "STEP_MISSION"]
+
+#: The evaluation flight: hover 2 s, 2 m/s North for 18 s, back to 0 for 10 s; the metrics
+#: count from the first step to the second.
+STEP_MISSION = {"steps": [(0.0, 0.0, 0.0), (2.0, 2.0, 0.0), (20.0, 0.0, 0.0)], "duration": 30.0}
+#: Time of the return step (the end of the metrics window) [s].
+STEP_END = 20.0
+#: Wall seconds to let the payload settle in PX4's hold between two flights.
+SETTLE_S = 12.0
+
+
+def _say(quiet: bool, text: str) -> None:
+    if not quiet:
+        print(text, file=sys.stderr, flush=True)
+
+
+def run_on_px4(
+    px4_dir,
+    out,
+    *,
+    seed: int = 0,
+    instance: int = 0,
+    training: float = 300.0,
+    scenario=None,
+    quiet: bool = False,
+) -> list[dict[str, Any]]:
+    """Run the whole comparison on PX4 (module doc); returns the metrics rows."""
+    from swingrt import sysid
+    from swingrt.experiments.runner import Experiment
+    from swingrt.hil.session import HilSession
+    from swingrt.io import load_flight
+    from swingrt.io.flight import Trace
+    from swingrt.mavlink.offboard import Mission, Watchdog, fly, load_controller
+    from swingrt.mavlink.training import collect_over_mavlink, fly_velocity_mission
+    from swingrt.metrics import step_metrics, swing_iae_floor
+    from swingrt.reports import plot_pareto
+    from swingrt.reports.plots import plot_case
+    from swingrt.reports.tables import write_metrics
+
+    if not (30.0 <= training < 86_400.0):
+        raise ConfigError(f"--training must be 30 s or more, not {training}", field="training")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    case = "default-step"
+    echo = None if quiet else (lambda line: print(line, file=sys.stderr, flush=True))
+
+    # 1. training flight on PX4
+    _say(quiet, f"[ px4 ] training flight ({training:g} s of random velocity steps)")
+    with HilSession(
+        px4_dir,
+        scenario=scenario,
+        instance=instance,
+        workdir=out / "px4-training",
+        log=out / f"{case}__training_physics.parquet",
+        seed=seed,
+        echo=echo,
+    ) as hil:
+        collect_over_mavlink(
+            hil.onboard_url,
+            duration=training,
+            seed=seed,
+            out=out / f"{case}__node_training.parquet",
+        )
+    if not hil.ulogs:
+        raise ConfigError(f"PX4 wrote no ULog in {out / 'px4-training'}")
+    ulog = out / "px4_training.ulg"
+    shutil.copyfile(hil.ulogs[-1], ulog)
+    summaries = [f"training session: {hil.summary}"]
+
+    # 2. identification from PX4's own log
+    _say(quiet, f"[ identification ] from PX4's ULog {ulog.name}")
+    data = load_flight(ulog)
+    data.to_parquet(out / f"{case}__training.parquet")
+    result = sysid.search(data)
+    result = sysid.select_for_control(data, result)
+    model = result.model
+    model.save(out / f"{case}__model.json")
+    plot_pareto(result, out / f"{case}__error_vs_delays.png")
+    controller, ts, axes = load_controller(out / f"{case}__model.json")
+
+    # 3. PID (PX4's velocity control) and MPC on the same step, one PX4 session
+    mission = Mission(list(STEP_MISSION["steps"]), float(STEP_MISSION["duration"]))
+    traces: dict[str, Trace] = {}
+    with HilSession(
+        px4_dir,
+        scenario=scenario,
+        instance=instance,
+        workdir=out / "px4-flights",
+        log=out / f"{case}__flights_physics.parquet",
+        seed=seed + 1,
+        echo=echo,
+    ) as hil:
+        _say(quiet, "[ px4 ] pid: PX4's velocity control on the 2 m/s step")
+        path = out / f"{case}__pid.parquet"
+        fly_velocity_mission(hil.onboard_url, mission, out=path)
+        traces["pid"] = Trace.from_parquet(path)
+        time.sleep(SETTLE_S)
+        _say(quiet, "[ px4 ] mpc: the MPC on the model from PX4's log")
+        path = out / f"{case}__mpc.parquet"
+        conn_url = hil.onboard_url
+        from swingrt.mavlink.link import connect
+
+        conn = connect(conn_url)
+        try:
+            fly(
+                conn,
+                controller,
+                ts=ts,
+                axes=axes,
+                mission=mission,
+                acc_limit=5.0,
+                log_path=path,
+                watchdog=Watchdog(ts),
+            )
+        finally:
+            conn.close()
+        traces["mpc"] = Trace.from_parquet(path)
+    for p in hil.ulogs[-1:]:
+        shutil.copyfile(p, out / "px4_flights.ulg")
+    summaries.append(f"flight session: {hil.summary}")
+
+    # 4. report
+    rows = []
+    notes = []
+    t0 = 2.0
+    for ctrl, tr in traces.items():
+        m = step_metrics(tr, t0=t0, axis="n", t_end=STEP_END)
+        rows.append({"scenario": case, "controller": ctrl, **m})
+    floors = {c: swing_iae_floor(tr, t0=t0, axis="n", t_end=STEP_END) for c, tr in traces.items()}
+    notes.append(
+        "flown on PX4 SITL with swingrt's physics in the loop (`swingrt hil`); PID = PX4's "
+        "own velocity control, MPC = swingrt's offboard node on acceleration setpoints"
+    )
+    notes.append(
+        "swing IAE floor (any controller): " + ", ".join(f"{c} {v:.2f}" for c, v in floors.items())
+    )
+    nm = model.diagnostics.get("test_nmae")
+    notes.append(
+        f"model from PX4's ULog ({data.meta.get('segment', 'whole log')}): DMDc q = "
+        f"{model.delays}, p = {model.rank}, test NMAE {float('nan') if nm is None else nm:.4f}"
+    )
+    notes += summaries
+    exp = Experiment(
+        name="px4-default-step",
+        description="PX4 SITL in the loop with swingrt's physics: 0.2 kg on 1 m, 2 m/s North "
+        "step at t = 2 s after a random-step training flight flown by PX4's velocity control.",
+        controllers=["pid", "mpc"],
+    )
+    write_metrics(out, exp, rows, notes)
+    plot_case(out / f"{case}.png", case, traces, "n")
+    return rows
