@@ -1,6 +1,7 @@
 """Type stubs of the Rust extension ``swingrt._core`` (checked by ``stubtest`` in CI)."""
 
 import os
+from collections.abc import Mapping, Sequence
 from typing import Any, Self, final
 
 import numpy as np
@@ -10,8 +11,10 @@ __version__: str
 __all__ = [
     "FLIGHT_COLUMNS",
     "GRAVITY",
+    "HilPlant",
     "LinearModel",
     "Lqr",
+    "MOTOR_COLUMNS",
     "Mpc",
     "Scenario",
     "STATE_KEYS",
@@ -41,6 +44,7 @@ GRAVITY: float
 TRACE_COLUMNS: tuple[str, ...]
 FLIGHT_COLUMNS: tuple[str, ...]
 STATE_KEYS: tuple[str, ...]
+MOTOR_COLUMNS: tuple[str, ...]
 
 # --- simulation -----------------------------------------------------------------------
 
@@ -71,6 +75,21 @@ class Scenario:
     def __reduce__(self) -> tuple[Any, tuple[str]]: ...
 
 def sim_real_time_factor(scenario: Scenario, seconds: float) -> float: ...
+
+@final
+class HilPlant:
+    def __new__(cls, scenario: Scenario, settings: Mapping[str, Any] | None = None) -> Self: ...
+    @property
+    def t(self) -> float: ...
+    @property
+    def step_dt(self) -> float: ...
+    @property
+    def payload_lifted(self) -> bool: ...
+    @property
+    def on_ground(self) -> bool: ...
+    def step(self, motors: Sequence[float]) -> None: ...
+    def sensors(self) -> dict[str, Any]: ...
+    def take_trace(self) -> dict[str, npt.NDArray[np.float64]]: ...
 
 @final
 class Simulator:

@@ -3,7 +3,8 @@
 PX4's control allocation must know the simulated geometry (rotor positions and yaw moment
 ratios), its hover thrust must match the simulated motors, and its gains should be those of
 the scenario's cascade, so that PX4 in the loop and the built-in look-alike fly the same
-vehicle alike (the roll/pitch rate gains are scaled for PX4's 250 Hz lockstep rate loop). Logging and failsafe parameters make the flight usable as training
+vehicle alike (the roll/pitch rate gains are scaled for PX4's 250 Hz lockstep rate
+loop). Logging and failsafe parameters make the flight usable as training
 data: the swing sensor's DEBUG_VECT is logged, and the loss of a ground station or of RC
 (there is none in the loop) is not a failsafe.
 """

@@ -50,6 +50,14 @@ ARM_TIMEOUT = 90.0
 CLIMB_TIMEOUT = 90.0
 
 
+_PHASE_TEXT = {
+    "arm": "arming",
+    "takeoff": "taking off",
+    "climb": "climbing",
+    "done": "holding at take-off altitude",
+}
+
+
 @dataclass
 class HilReport:
     """What one HIL session did, with the real-time figures of the loop."""
@@ -263,8 +271,7 @@ class HilServer:
                 )
 
     def _enter(self, phase: str) -> None:
-        log.info("hil: %s", {"arm": "arming", "takeoff": "taking off", "climb": "climbing",
-                              "done": "holding at take-off altitude"}.get(phase, phase))  # fmt: skip
+        log.info("hil: %s", _PHASE_TEXT.get(phase, phase))
         self._phase = phase
         self._phase_since = time.monotonic()
         self._next_try = 0.0

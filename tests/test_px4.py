@@ -1,0 +1,151 @@
+"""End to end on real PX4 firmware: PX4 SITL flies swingrt's physics (``swingrt hil``).
+
+Needs a PX4 SITL build: ``SWINGRT_PX4_SITL`` points to it (a folder with ``run-px4`` or a
+``px4_sitl`` build folder); without it these tests skip and say so. Real time: about 5 min.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+
+import numpy as np
+import pytest
+
+from swingrt.io.flight import Trace
+
+PX4_DIR = os.environ.get("SWINGRT_PX4_SITL")
+
+pytestmark = [
+    pytest.mark.px4,
+    pytest.mark.skipif(
+        not PX4_DIR,
+        reason="SWINGRT_PX4_SITL is not set: no PX4 SITL build to fly against",
+    ),
+]
+
+GRAVITY = 9.80665
+M_VEHICLE, M_PAYLOAD, CABLE = 0.952, 0.2, 1.0
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    """The whole comparison on PX4 (short training flight): training → ULog → MPC."""
+    from swingrt.hil.pipeline import run_on_px4
+
+    out = tmp_path_factory.mktemp("px4run")
+    rows = run_on_px4(PX4_DIR, out, seed=0, instance=1, training=90.0, quiet=True)
+    return out, {r["controller"]: r for r in rows}
+
+
+def _ulog(path, topics):
+    from pyulog import ULog
+
+    return {d.name: d.data for d in ULog(str(path), topics).data_list}
+
+
+def _swing_period(t, swing, t0, t1):
+    """Mean period of the swing oscillation between t0 and t1 from its zero crossings."""
+    m = (t >= t0) & (t <= t1)
+    s = swing[m] - np.mean(swing[m])
+    tt = t[m]
+    up = np.nonzero((s[:-1] < 0) & (s[1:] >= 0))[0]
+    cross = tt[up] - s[up] * (tt[up + 1] - tt[up]) / (s[up + 1] - s[up])
+    assert len(cross) >= 3, "too few swing oscillations to time"
+    return float(np.mean(np.diff(cross)))
+
+
+def test_training_log_is_px4s_own_with_the_swing_sensor(report):
+    out, _ = report
+    log = _ulog(out / "px4_training.ulg", ["debug_vect", "vehicle_status"])
+    assert "debug_vect" in log, "PX4 did not log the swing sensor (SDLOG_PROFILE debug bit)"
+    names = {bytes(n).split(b"\0")[0] for n in np.stack(
+        [log["debug_vect"][f"name[{i}]"] for i in range(10)], axis=1
+    ).astype(np.uint8)}  # fmt: skip
+    assert b"SWING" in names
+    # The training flight was flown in OFFBOARD and handed back (no failsafe on the way).
+    nav = log["vehicle_status"]["nav_state"]
+    assert (nav == 14).any()
+    after = np.nonzero(nav == 14)[0][-1] + 1
+    assert after < len(nav) and nav[after] == 4, "not handed back to LOITER"
+    assert not log["vehicle_status"]["failsafe"][: after + 1].any()
+
+
+def test_pid_swings_as_physics_says(report):
+    out, rows = report
+    pid = Trace.from_parquet(out / "default-step__pid.parquet")
+    period = _swing_period(pid.t, pid["swing_n"], 8.0, 20.0)
+    pinned = 2 * math.pi * math.sqrt(CABLE / GRAVITY)
+    free = pinned * math.sqrt(M_VEHICLE / (M_VEHICLE + M_PAYLOAD))
+    assert free * 0.98 < period < pinned * 1.02, (free, period, pinned)
+    assert rows["pid"]["peak_swing_deg"] > 10.0
+
+
+def test_mpc_from_px4_log_damps_the_swing(report):
+    _, rows = report
+    mpc, pid = rows["mpc"], rows["pid"]
+    assert mpc["swing_settle_s"] <= 4.0
+    assert mpc["swing_excess_iae_deg_s"] <= 0.1 * pid["swing_excess_iae_deg_s"]
+    assert mpc["overshoot_pct"] <= 10.0
+    assert mpc["ss_error"] <= 0.03 * 2.0
+    assert math.isfinite(mpc["v_settle_s"])
+
+
+def test_mpc_flight_has_no_missed_ticks_and_a_clean_lockstep(report):
+    out, _ = report
+    mpc = Trace.from_parquet(out / "default-step__mpc.parquet")
+    ts = np.diff(mpc.t)
+    assert np.allclose(ts, ts[0], atol=1e-9), "a tick was skipped"
+    text = (out / "metrics.md").read_text()
+    assert "lockstep steps" in text
+
+
+def test_hover_offboard_and_offboard_loss_failsafe(tmp_path):
+    """Hover holds within 0.3 m with no estimator reset; OFFBOARD is accepted, and a node
+    that falls silent hands the vehicle to PX4's failsafe (Hold)."""
+    from swingrt.hil.session import HilSession
+    from swingrt.mavlink.link import connect
+    from swingrt.mavlink.offboard import OffboardSession
+
+    physics = tmp_path / "physics.parquet"
+    with HilSession(PX4_DIR, instance=2, workdir=tmp_path / "px4", log=physics, seed=3) as hil:
+        time.sleep(8.0)
+        conn = connect(hil.onboard_url)
+        try:
+            node = OffboardSession(conn, ts=0.02)
+            node.connect()
+            node._engage()
+            assert node.tel.mode is not None
+            deadline = time.monotonic() + 3.0
+            while time.monotonic() < deadline and node.tel.mode[0] != 6:
+                node._drain()
+                node._neutral()
+                time.sleep(0.02)
+            assert node.tel.mode[0] == 6, "OFFBOARD not shown in PX4's heartbeat"
+            # The node dies: no hand-back, no setpoints. PX4 must leave OFFBOARD itself.
+            deadline = time.monotonic() + 5.0
+            while time.monotonic() < deadline and node.tel.mode[0] == 6:
+                node._drain()
+                time.sleep(0.05)
+            assert node.tel.mode[0] != 6, "PX4 stayed in OFFBOARD without setpoints"
+        finally:
+            conn.close()
+    tr = Trace.from_parquet(physics)
+    ulog = _ulog(hil.ulogs[-1], ["vehicle_local_position", "vehicle_status"])
+    lp = ulog["vehicle_local_position"]
+    t_px4 = lp["timestamp"] * 1e-6
+    # Steady hover: the 6 s before OFFBOARD, after the take-off transient.
+    st = ulog["vehicle_status"]
+    t_off = st["timestamp"][np.nonzero(st["nav_state"] == 14)[0][0]] * 1e-6
+    hover = (t_px4 > t_off - 6.0) & (t_px4 < t_off)
+    for counter in ("xy_reset_counter", "z_reset_counter", "vxy_reset_counter"):
+        assert np.ptp(lp[counter][hover]) == 0, f"EKF2 reset ({counter}) in steady hover"
+    assert not st["failsafe"][st["timestamp"] * 1e-6 < t_off].any()
+    m = (tr.t > t_off - 6.0) & (tr.t < t_off)
+    horiz = np.hypot(tr["pn"][m] - tr["pn"][m].mean(), tr["pe"][m] - tr["pe"][m].mean())
+    assert horiz.max() < 0.3 and abs(tr["pd"][m].mean() + 10.0) < 0.3
+    # The loss was PX4's failsafe: the status flags it after OFFBOARD.
+    after = st["timestamp"] * 1e-6 > t_off
+    assert st["failsafe"][after].any()
+    assert "lockstep steps" in hil.summary
