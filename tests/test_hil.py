@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 
@@ -115,3 +116,103 @@ def test_hil_plant_rejects_bad_settings_and_commands():
     plant = HilPlant(sc)
     with pytest.raises(SimulationError, match="motor 3"):
         plant.step([0.5, 0.5, math.inf, 0.5])
+
+
+@pytest.mark.realtime
+@pytest.mark.parametrize(
+    "fault", ["bytes", "bad_crc", "truncated", "nan", "huge", "flood", "replay", "silent"]
+)
+def test_hostile_flight_controller_neither_crashes_nor_hangs_the_server(fault):
+    """A flight controller that sends garbage, broken frames, absurd motor commands, floods,
+    replays or stops answering: the server keeps stepping (a lost answer costs one step of
+    stale commands), refuses non-finite commands, and its trace stays physical."""
+    import random
+    import threading
+
+    from swingrt._core import HilPlant, Scenario
+    from swingrt.hil import HilServer
+    from swingrt.mavlink.link import connect, mavlink
+
+    sc = Scenario.builtin("hover").with_overrides({"setpoints": []})
+    port = _free_port()
+    server = HilServer(HilPlant(sc), f"tcpin:127.0.0.1:{port}", gcs_url=None, speed=20.0)
+    done = threading.Event()
+    rng = random.Random(f"hil-{fault}")
+    good = 0.3
+
+    def controls(conn, t, value):
+        conn.mav.hil_actuator_controls_send(
+            t, [value] * 4 + [0.0] * 12, mavlink.MAV_MODE_FLAG_SAFETY_ARMED, 0
+        )
+
+    def flight_controller():
+        conn = connect(f"tcp:127.0.0.1:{port}", system_id=1, component_id=1)
+        sock = conn.port
+        last = None
+        k = 0
+        try:
+            while not done.is_set():
+                msg = conn.recv_match(type="HIL_SENSOR", blocking=True, timeout=1)
+                if msg is None:
+                    continue
+                k += 1
+                t = msg.time_usec
+                # A lost answer costs the server 0.5 s of waiting: only a few of those.
+                unanswered = fault in ("bad_crc", "truncated", "silent")
+                hostile = k % 7 == 0 and (not unanswered or k < 30)
+                if not hostile:
+                    controls(conn, t, good)
+                    continue
+                if fault == "bytes":
+                    sock.sendall(bytes(rng.getrandbits(8) for _ in range(rng.randint(1, 300))))
+                    controls(conn, t, good)
+                elif fault in ("bad_crc", "truncated"):
+                    frame = bytearray(
+                        mavlink.MAVLink_hil_actuator_controls_message(
+                            t, [good] * 16, mavlink.MAV_MODE_FLAG_SAFETY_ARMED, 0
+                        ).pack(conn.mav)
+                    )
+                    if fault == "bad_crc":
+                        frame[-1] ^= 0xFF
+                    else:
+                        frame = frame[: rng.randint(1, len(frame) - 1)]
+                    sock.sendall(bytes(frame))  # no valid answer to this step
+                elif fault == "nan":
+                    controls(conn, t, math.nan)
+                elif fault == "huge":
+                    controls(conn, t, 1e30)
+                elif fault == "flood":
+                    for _ in range(300):
+                        conn.mav.heartbeat_send(2, 12, 0, 0, 0)
+                    controls(conn, t, good)
+                elif fault == "replay":
+                    if last is not None:
+                        sock.sendall(last)
+                    controls(conn, t, good)
+                elif fault != "silent":  # silent: this step goes unanswered
+                    controls(conn, t, good)
+                last = bytes(
+                    mavlink.MAVLink_hil_actuator_controls_message(
+                        t, [good] * 16, mavlink.MAV_MODE_FLAG_SAFETY_ARMED, 0
+                    ).pack(conn.mav)
+                )
+        finally:
+            conn.close()
+
+    fc = threading.Thread(target=flight_controller, daemon=True)
+    fc.start()
+    report = server.run(duration=1.5)
+    done.set()
+    fc.join(timeout=10)
+    server.close()
+    assert report.time_usec_monotonic
+    assert report.steps >= 370  # 1.5 s at 4 ms, nothing stalled for good
+    tr = server.trace()
+    for c in ("pn", "pe", "pd", "vn", "vd", "roll", "pitch"):
+        assert np.all(np.isfinite(tr[c])), c
+    motors = np.stack([tr[f"motor_{i}"] for i in range(1, 5)])
+    assert np.all((motors >= 0.0) & (motors <= 1.0))
+    if fault == "nan":
+        assert report.rejected_controls > 0
+    if fault in ("bad_crc", "truncated", "silent"):
+        assert report.unanswered_steps > 0

@@ -1,8 +1,8 @@
 """Nothing lost: SIGKILL at seeded random moments, repeatedly.
 
-For ``collect``, ``identify``, ``experiment``, ``sitl --log`` and ``fly --log``: every output
-file is afterwards either the complete old file (left from an earlier complete run), a
-complete new file, or absent - never a torn one (every writer goes through
+For ``collect``, ``identify``, ``experiment``, ``sitl --log``, ``hil --log`` and
+``fly --log``: every output file is afterwards either the complete old file (left from an
+earlier complete run), a complete new file, or absent - never a torn one (every writer goes through
 ``swingrt.io.atomic`` or the binding's ``write_atomic``). Kill moments are drawn over the
 command's whole run, and for the two MAVLink commands also just after the SIGINT that makes
 them write their log, so the kill lands inside the write.
@@ -166,6 +166,24 @@ KILL_TARGETS: list[KillTarget] = [
         "sitl",
         lambda out, inp: _swingrt(
             "sitl", "--listen", f"udp:127.0.0.1:{_free_port()}", "--log", str(out / "v.parquet")
+        ),
+        runtime=3.0,
+        interrupt=True,
+    ),
+    KillTarget(
+        "hil",
+        lambda out, inp: _swingrt(
+            "hil",
+            "--connect",
+            f"tcpin:127.0.0.1:{_free_port()}",
+            "--swing-link",
+            f"udpout:127.0.0.1:{_free_port()}",
+            "--speed",
+            "5",
+            "--seed",
+            inp["seed"],
+            "--log",
+            str(out / "h.parquet"),
         ),
         runtime=3.0,
         interrupt=True,

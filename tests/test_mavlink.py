@@ -406,7 +406,7 @@ def write_mission(path: Path, step_at=1.0, back_at=5.0, duration=8.0) -> Path:
 def test_fly_mission_with_pd_double_and_clean_handback(vehicle, tmp_path):
     from swingrt.io import load_flight
 
-    url, _ = vehicle
+    url, sitl = vehicle
     mission = write_mission(tmp_path / "m.toml")
     node = spawn("node", url, str(mission), str(tmp_path / "node.parquet"))
     node.wait(timeout=30.0)
@@ -420,9 +420,15 @@ def test_fly_mission_with_pd_double_and_clean_handback(vehicle, tmp_path):
     assert 1.6 < np.mean(vn[(t > 4.0) & (t < 5.0)]) < 2.3
     assert abs(np.mean(vn[t > 7.5])) < 0.4
     assert np.max(np.abs(tr["swing_n"])) > 0.01  # the step swung the payload ...
+    time.sleep(1.5)  # past the vehicle's offboard-loss timeout
     obs = observer(url)
     assert current_mode(obs) == (4, 3)  # ... and the node handed back to hold
     obs.close()
+    # by its own request, not by the vehicle's offboard-loss failsafe (the vehicle acks a
+    # mode command twice, as PX4 does: the OFFBOARD request's second ack is no answer)
+    vehicle_log = stop(sitl)
+    assert "AUTO.LOITER (requested)" in vehicle_log, vehicle_log
+    assert "no setpoint for" not in vehicle_log, vehicle_log
 
 
 def test_failsafe_when_node_is_killed(vehicle, tmp_path):

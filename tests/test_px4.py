@@ -42,7 +42,8 @@ def report(tmp_path_factory):
 def _ulog(path, topics):
     from pyulog import ULog
 
-    return {d.name: d.data for d in ULog(str(path), topics).data_list}
+    with open(path, "rb") as fh:
+        return {d.name: d.data for d in ULog(fh, topics).data_list}
 
 
 def _swing_period(t, swing, t0, t1):

@@ -40,8 +40,12 @@ __all__ = ["HilServer", "HilReport"]
 
 log = logging.getLogger("swingrt.hil")
 
-#: Wall seconds PX4 may take to answer one sensor step before the link counts as dead.
+#: Wall seconds of silence from PX4 (no motor commands at all) before the link counts as dead.
 ACTUATOR_TIMEOUT = 10.0
+#: Wall seconds to wait for the answer to one step: a frame lost on a serial link would
+#: otherwise stall both sides for ever (each waiting for the other); after this the step is
+#: taken with the last motor commands and counted as unanswered.
+STEP_ANSWER_TIMEOUT = 0.5
 #: Wall seconds to wait for PX4 to connect to the simulator port.
 CONNECT_TIMEOUT = 60.0
 #: Wall seconds to wait for PX4 to arm (its preflight checks need the estimator converged).
@@ -72,6 +76,8 @@ class HilReport:
     swing_messages: int = 0
     statustext: list = field(default_factory=list)
     time_usec_monotonic: bool = True
+    unanswered_steps: int = 0
+    rejected_controls: int = 0
 
     @property
     def speed(self) -> float:
@@ -86,7 +92,8 @@ class HilReport:
             f"(×{self.speed:.2f}), {self.lockstep_steps} lockstep steps, PX4 answered in "
             f"{lat.get('median', math.nan):.2f} ms median / {lat.get('p99', math.nan):.2f} ms "
             f"p99, {self.late_steps} steps behind wall time, {self.gps_fixes} GPS fixes, "
-            f"{self.swing_messages} swing messages"
+            f"{self.swing_messages} swing messages, {self.unanswered_steps} unanswered steps, "
+            f"{self.rejected_controls} rejected motor commands"
         )
 
 
@@ -129,6 +136,7 @@ class HilServer:
         self._next_beat = 0.0
         self._last_time_usec = 0
         self._height = 0.0
+        self._motors = [0.0] * 4
         self.ready = False
 
     # ------------------------------------------------------------------ messages out
@@ -214,6 +222,21 @@ class HilServer:
             self.report.statustext.append(text.strip("\x00"))
             log.info("PX4: %s", text.strip("\x00"))
 
+    def _take_controls(self, msg) -> None:
+        """PX4's motor commands; zero while disarmed. A command that is not a finite number
+        is refused (the last good one stays): the plant is physics, not an input validator
+        for whatever arrives on the link."""
+        if not msg.mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED:
+            self._motors = [0.0] * 4
+            return
+        motors = [float(x) for x in msg.controls[:4]]
+        if all(math.isfinite(m) for m in motors):
+            self._motors = motors
+            return
+        if self.report.rejected_controls == 0:
+            log.warning("hil: refused non-finite motor commands %s (kept the last ones)", motors)
+        self.report.rejected_controls += 1
+
     # ------------------------------------------------------------------ take-off
 
     def _command(self, command: int, *params: float) -> None:
@@ -287,6 +310,7 @@ class HilServer:
         t_sim0 = plant.t
         k = 0
         stopping_since: float | None = None
+        last_answer = time.monotonic()
         self._height = 0.0
         try:
             while True:
@@ -309,21 +333,25 @@ class HilServer:
                 c0 = time.perf_counter()
                 self._send_sensors(f, k)
                 if lockstep:
-                    timeout = 1.0 if stopping_since is not None else ACTUATOR_TIMEOUT
-                    msg = self._read_actuators(timeout)
+                    msg = self._read_actuators(STEP_ANSWER_TIMEOUT)
                     if msg is None:
                         if stopping_since is not None:
                             break
-                        raise LinkError(
-                            f"PX4 sent no HIL_ACTUATOR_CONTROLS for {ACTUATOR_TIMEOUT:g} s "
-                            f"at t = {plant.t:.2f} s"
-                        )
-                    self._latency.append(time.perf_counter() - c0)
-                    self.report.lockstep_steps += 1
+                        self.report.unanswered_steps += 1
+                        if time.monotonic() - last_answer > ACTUATOR_TIMEOUT:
+                            raise LinkError(
+                                f"PX4 sent no HIL_ACTUATOR_CONTROLS for {ACTUATOR_TIMEOUT:g} s "
+                                f"at t = {plant.t:.2f} s"
+                            )
+                    else:
+                        last_answer = time.monotonic()
+                        self._latency.append(time.perf_counter() - c0)
+                        self.report.lockstep_steps += 1
                 else:
                     msg = self._read_actuators(0.0)
                     if msg is not None:
                         lockstep = True
+                        last_answer = time.monotonic()
                         log.info("hil: PX4 connected, lockstep from t = %.2f s", plant.t)
                     elif plant.t - t_sim0 > CONNECT_TIMEOUT * self.speed:
                         tail = self.px4.output_tail() if self.px4 is not None else ""
@@ -331,10 +359,9 @@ class HilServer:
                             f"PX4 did not connect to the simulator port within "
                             f"{CONNECT_TIMEOUT:g} s{': ' + tail if tail else ''}"
                         )
-                motors = [0.0] * 4
-                if msg is not None and msg.mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED:
-                    motors = [float(x) for x in msg.controls[:4]]
-                plant.step(motors)
+                if msg is not None:
+                    self._take_controls(msg)
+                plant.step(self._motors)
                 k += 1
                 self._poll_gcs()
                 if stopping_since is None:

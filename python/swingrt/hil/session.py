@@ -58,6 +58,7 @@ class HilSession:
         self.ulogs: list[Path] = []
         self.summary = ""
         self._ready = threading.Event()
+        self._thread: threading.Thread | None = None
         self.proc: subprocess.Popen | None = None
 
     @property
@@ -89,7 +90,8 @@ class HilSession:
             text=True,
             env={**os.environ, "PYTHONUNBUFFERED": "1"},
         )
-        threading.Thread(target=self._reader, daemon=True).start()
+        self._thread = threading.Thread(target=self._reader, daemon=True)
+        self._thread.start()
         deadline = time.monotonic() + READY_TIMEOUT
         while not self._ready.wait(0.2):
             if self.proc.poll() is not None or time.monotonic() > deadline:
@@ -101,15 +103,19 @@ class HilSession:
     def stop(self) -> None:
         """SIGINT the session (it lands nothing: PX4 is shut down in the air, its log
         closed) and wait for it."""
-        if self.proc is None or self.proc.poll() is not None:
+        if self.proc is None:
             return
-        self.proc.send_signal(signal.SIGINT)
-        try:
-            self.proc.wait(timeout=40.0)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait(timeout=5.0)
-        time.sleep(0.2)  # let the reader take the last lines
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout=40.0)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(timeout=5.0)
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)  # the reader takes the last lines
+        if self.proc.stdout is not None:
+            self.proc.stdout.close()
 
     def __exit__(self, *exc) -> None:
         self.stop()

@@ -18,6 +18,7 @@ commander and mavlink modules:
   a PX4 main/sub mode: POSCTL and AUTO.LOITER hold the current position; OFFBOARD is
   TEMPORARILY_REJECTED until valid setpoints have streamed (gaps < 0.5 s, i.e. > 2 Hz as PX4
   requires) for ``offboard_min_stream`` (1 s). SET_MODE (legacy) is honoured the same way.
+  Like PX4, a mode command is acknowledged twice.
 - SET_POSITION_TARGET_LOCAL_NED in MAV_FRAME_LOCAL_NED, read as PX4's mavlink receiver and
   PositionControl do: an ignored field is NaN; per axis the position is used if given,
   else the velocity, else the acceleration (feed-forward terms are not modelled); North and
@@ -299,6 +300,9 @@ class Vehicle:
                 self._ack(conn, cmd, mavlink.MAV_RESULT_UNSUPPORTED)
                 return
             result = self.request_mode(int(msg.param2), int(msg.param3), now)
+            # PX4 acknowledges a mode command twice on the link it came in on (seen on PX4
+            # SITL): a node must not take the second ack for the answer to its next request.
+            self._ack(conn, cmd, result)
             self._ack(conn, cmd, result)
         elif cmd == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
             if msg.param1 >= 0.5:
