@@ -55,9 +55,9 @@ def run(args) -> int:
             quiet=args.quiet,
         )
         print((Path(args.out) / "metrics.md").read_text(encoding="utf-8"))
-        pid = next(r for r in rows if r["controller"] == "pid")
-        mpc = next(r for r in rows if r["controller"] == "mpc")
-        ratio = mpc["swing_excess_iae_deg_s"] / max(pid["swing_excess_iae_deg_s"], 1e-12)
+        by = {r["controller"]: r for r in rows}
+        excess = "swing_excess_iae_deg_s"
+        ratio = by["mpc"][excess] / max(by["pid"][excess], 1e-12)
         print(f"MPC swing IAE above the momentum floor is {ratio:.3f}× PX4 PID's")
         print(f"report: {args.out}/ (metrics, figures, traces, model, PX4 ULogs)")
         return 0

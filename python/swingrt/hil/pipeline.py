@@ -26,9 +26,15 @@ from swingrt.errors import ConfigError
 
 __all__ = ["run_on_px4", "STEP_MISSION"]
 
-#: The evaluation flight: hover 2 s, 2 m/s North for 18 s, back to 0 for 10 s; the metrics
-#: count from the first step to the second.
-STEP_MISSION = {"steps": [(0.0, 0.0, 0.0), (2.0, 2.0, 0.0), (20.0, 0.0, 0.0)], "duration": 30.0}
+#: The evaluation flight: hover 2 s, 2 m/s North for 18 s, back to 0 for 10 s, as
+#: (t, vn, ve) steps; the metrics count from the first step to the second.
+STEP_MISSION: list[tuple[float, float, float]] = [
+    (0.0, 0.0, 0.0),
+    (2.0, 2.0, 0.0),
+    (20.0, 0.0, 0.0),
+]
+#: Length of the evaluation flight [s].
+STEP_DURATION = 30.0
 #: Time of the return step (the end of the metrics window) [s].
 STEP_END = 20.0
 #: Wall seconds to let the payload settle in PX4's hold between two flights.
@@ -105,7 +111,7 @@ def run_on_px4(
     controller, ts, axes = load_controller(out / f"{case}__model.json")
 
     # 3. PID (PX4's velocity control) and MPC on the same step, one PX4 session
-    mission = Mission(list(STEP_MISSION["steps"]), float(STEP_MISSION["duration"]))
+    mission = Mission(list(STEP_MISSION), STEP_DURATION)
     traces: dict[str, Trace] = {}
     with HilSession(
         px4_dir,

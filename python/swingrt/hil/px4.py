@@ -45,6 +45,7 @@ class Px4Sitl:
         root = Path(px4_dir).expanduser()
         if not root.is_dir():
             raise ConfigError(f"--px4: {root} is not a folder", field="px4")
+        self._launcher: list[str] | None
         if (root / "run-px4").is_file():
             self._launcher = [str(root / "run-px4"), "--airframe", "hil"]
             self._env_params = False
