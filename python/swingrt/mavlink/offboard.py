@@ -584,7 +584,8 @@ class OffboardSession:
         )
 
     def _engage(self) -> None:
-        """Stream neutral setpoints, then request OFFBOARD until accepted."""
+        """Stream neutral setpoints, then request OFFBOARD (only while the telemetry is
+        fresh) until accepted."""
         t_end = time.monotonic() + self.prestream
         while time.monotonic() < t_end:
             self._drain()
@@ -604,9 +605,12 @@ class OffboardSession:
                 return
             if result is not None and result != mavlink.MAV_RESULT_TEMPORARILY_REJECTED:
                 raise FlightAbort(f"vehicle refused OFFBOARD (MAV_RESULT {result})")
+            # Never take over on stale telemetry: the first tick would act on it.
+            stale = self.watchdog.check_inputs(self.tel, now)
             if now >= give_up:
-                raise FlightAbort("vehicle did not accept OFFBOARD within 5 s")
-            if now >= next_try:
+                why = f" (telemetry: {stale})" if stale and not tries else ""
+                raise FlightAbort(f"vehicle did not accept OFFBOARD within 5 s{why}")
+            if now >= next_try and stale is None:
                 self._request_mode(OFFBOARD_MAIN, 0)
                 tries += 1
                 next_try = now + 0.5
