@@ -22,6 +22,13 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     tmp_path = Path(tmp)
     try:
         yield tmp_path
+        # On disk before the rename makes it the file: a crash right after leaves the new
+        # file whole, not an empty one.
+        fd = os.open(tmp_path, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
         os.replace(tmp_path, target)
     finally:
         if tmp_path.exists():
