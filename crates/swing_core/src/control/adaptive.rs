@@ -1,0 +1,601 @@
+//! Adaptive MPC: the identified model follows the payload in flight.
+//!
+//! Each tick (the real-time path, no allocation): the newest measured frame and the last
+//! applied input update the online DMDc ([`OnlineDmdc`]: forgetting, excitation gate, change
+//! detector on the adopted model's one-step residual); then the active [`MpcController`]
+//! steps. When the detector has fired and, since then, `min_new_samples` excited samples
+//! have entered the estimate, the current factor is copied into a recycled buffer and handed
+//! to the synthesis, which runs off the tick path:
+//! - `thread` (real time): a worker thread owns the template model and the settings; it
+//!   builds the rank-p model from the factor (the truncated SVD of the batch fit), designs
+//!   the MPC (condensing, law, Kalman gain) and checks it. The tick only `try_send`s and
+//!   `try_recv`s on bounded channels and never waits.
+//! - `deferred` (simulation): the same job runs in [`SwingController::between_ticks`], which
+//!   runners call after the timed tick, so that a simulated flight stays a pure function of
+//!   its scenario.
+//!
+//! Check before a swap (`control::check`, bounds of `control::selection`): the candidate's
+//! spectral radius is at most `max_spectral_radius`, and its MPC, in closed loop on the
+//! candidate model itself and on the candidate with extra vehicle drag, each behind every
+//! input lag, holds hover, tracks a velocity step and stays within `bounds`. A candidate
+//! that fails is dropped and the old controller kept; the synthesis retries after
+//! `retry_samples` more excited samples.
+//!
+//! The swap happens at the start of a tick, before the step: the new controller takes over
+//! the measured delay stack, the last input and the state estimate of the old one (bumpless).
+//! The disturbance estimate restarts at zero when the model has the affine offset, because
+//! the refit's constant term has just absorbed the steady offsets of the recent data and
+//! keeping the old estimate would count them twice; without the affine column it is kept.
+//! Replaced controllers and models are dropped on the worker, not on the tick.
+
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TryRecvError, TrySendError};
+use std::thread::JoinHandle;
+
+use serde::{Deserialize, Serialize};
+
+use super::check::{step_check_with, StepCheck, StepCheckSettings};
+use super::layout::{AxisLayout, Measured};
+use super::selection::CheckBounds;
+use super::{
+    AxisState, ControlError, ControllerEvent, MpcController, MpcSettings, SwingController, TickInfo,
+};
+use crate::config::{non_negative, positive, ConfigError};
+use crate::sysid::online::{model_from_factor, OnlineDmdc, OnlineSettings};
+use crate::sysid::{LinearModel, Offset};
+
+/// Where the re-synthesis runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SynthesisMode {
+    /// A worker thread (real time; the swap tick depends on wall-clock time).
+    Thread,
+    /// Between ticks on the caller's thread (simulation; reproducible).
+    #[default]
+    Deferred,
+}
+
+/// Settings of the adaptive MPC (the MPC's own settings are separate).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AdaptiveSettings {
+    /// Online identification: forgetting, excitation gate, detector.
+    pub online: OnlineSettings,
+    /// Excited samples that must enter the estimate after a detection before a rebuild
+    /// [samples of the model's dt].
+    pub min_new_samples: usize,
+    /// Further excited samples before retrying after a rejected candidate [samples].
+    pub retry_samples: usize,
+    /// Velocity step of the closed-loop check [m/s].
+    pub check_step: f64,
+    /// Input lags of the closed-loop check [s] (0 = none).
+    pub input_lags: Vec<f64>,
+    /// Linear vehicle drag added to the candidate as a second check plant [1/s] (0 = only
+    /// the candidate itself).
+    pub check_drag: f64,
+    /// Pass bounds of the check (fractions of the step).
+    pub bounds: CheckBounds,
+    /// Largest spectral radius of a candidate's A [dimensionless].
+    pub max_spectral_radius: f64,
+    /// Where the synthesis runs: `deferred` (simulation) or `thread` (real time).
+    pub synthesis: SynthesisMode,
+}
+
+impl Default for AdaptiveSettings {
+    fn default() -> Self {
+        Self {
+            online: OnlineSettings::default(),
+            min_new_samples: 150,
+            retry_samples: 60,
+            check_step: 2.0,
+            input_lags: vec![0.0, 0.1],
+            check_drag: 0.12,
+            bounds: CheckBounds::default(),
+            max_spectral_radius: 1.001,
+            synthesis: SynthesisMode::Deferred,
+        }
+    }
+}
+
+impl AdaptiveSettings {
+    /// Check every field; the error names the first bad one.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.online.validate().map_err(|e| e.within("online"))?;
+        if self.min_new_samples == 0 {
+            return Err(ConfigError::new("min_new_samples", "must be at least 1"));
+        }
+        if self.retry_samples == 0 {
+            return Err(ConfigError::new("retry_samples", "must be at least 1"));
+        }
+        positive("check_step", self.check_step)?;
+        if self.input_lags.is_empty() {
+            return Err(ConfigError::new(
+                "input_lags",
+                "needs at least one lag (0 = none)",
+            ));
+        }
+        for (i, l) in self.input_lags.iter().enumerate() {
+            non_negative(&format!("input_lags[{i}]"), *l)?;
+        }
+        non_negative("check_drag", self.check_drag)?;
+        for (name, v) in [
+            ("bounds.overshoot", self.bounds.overshoot),
+            ("bounds.final_error", self.bounds.final_error),
+            ("bounds.hold_drift", self.bounds.hold_drift),
+        ] {
+            positive(name, v)?;
+        }
+        positive("max_spectral_radius", self.max_spectral_radius)?;
+        Ok(())
+    }
+}
+
+/// The factor handed to the synthesis (a recycled buffer).
+struct Job {
+    factor: Vec<f64>,
+    weight: f64,
+}
+
+/// A candidate that passed the check.
+struct Candidate {
+    mpc: MpcController,
+    model: LinearModel,
+}
+
+/// What a synthesis returns; `job` comes back for reuse.
+struct Outcome {
+    job: Box<Job>,
+    result: Result<Box<Candidate>, String>,
+    check: Option<StepCheck>,
+}
+
+/// Messages to the worker.
+enum ToWorker {
+    Build(Box<Job>),
+    Drop(#[allow(dead_code)] Box<dyn std::any::Any + Send>),
+}
+
+/// What the synthesis needs besides the factor: fixed for the controller's life.
+struct Synthesizer {
+    template: LinearModel,
+    mpc: MpcSettings,
+    settings: AdaptiveSettings,
+}
+
+impl Synthesizer {
+    fn run(&self, job: Box<Job>) -> Outcome {
+        let mut check = None;
+        let result = self.build(&job, &mut check);
+        Outcome { job, result, check }
+    }
+
+    fn build(
+        &self,
+        job: &Job,
+        check_out: &mut Option<StepCheck>,
+    ) -> Result<Box<Candidate>, String> {
+        let t = &self.template;
+        let full = t.m() + usize::from(t.offset == Offset::Affine) + t.n() * t.delays;
+        let rank = t.rank.clamp(1, full);
+        let model =
+            model_from_factor(&job.factor, job.weight, rank, t).map_err(|e| e.to_string())?;
+        let rho = model.spectral_radius().map_err(|e| e.to_string())?;
+        if !(rho <= self.settings.max_spectral_radius) {
+            return Err(format!(
+                "spectral radius {rho:.4} above {}",
+                self.settings.max_spectral_radius
+            ));
+        }
+        let mut mpc = MpcController::new(&model, self.mpc.clone()).map_err(|e| e.to_string())?;
+        let mut plants = vec![model.clone()];
+        if self.settings.check_drag > 0.0 {
+            plants.push(
+                model
+                    .with_velocity_drag(self.settings.check_drag)
+                    .map_err(|e| e.to_string())?,
+            );
+        }
+        let mut worst = StepCheck {
+            overshoot: f64::NEG_INFINITY,
+            final_error: f64::NEG_INFINITY,
+            hold_drift: f64::NEG_INFINITY,
+        };
+        for plant in &plants {
+            for &input_lag in &self.settings.input_lags {
+                let c = StepCheckSettings {
+                    step: self.settings.check_step,
+                    input_lag,
+                    ..StepCheckSettings::default()
+                };
+                let r = step_check_with(&mut mpc, &model, plant, &c).map_err(|e| e.to_string())?;
+                worst.overshoot = worst.overshoot.max(r.overshoot);
+                worst.final_error = worst.final_error.max(r.final_error);
+                worst.hold_drift = worst.hold_drift.max(r.hold_drift);
+            }
+        }
+        *check_out = Some(worst);
+        if !self.settings.bounds.admit(&worst) {
+            return Err(format!(
+                "closed-loop check failed: overshoot {:.3}, final error {:.3}, hold drift {:.3}",
+                worst.overshoot, worst.final_error, worst.hold_drift
+            ));
+        }
+        Ok(Box::new(Candidate { mpc, model }))
+    }
+}
+
+enum Synthesis {
+    Thread {
+        tx: Option<SyncSender<ToWorker>>,
+        rx: Receiver<Outcome>,
+        handle: Option<JoinHandle<()>>,
+    },
+    Deferred {
+        synth: Box<Synthesizer>,
+        pending: Option<Box<Job>>,
+        done: Option<Outcome>,
+    },
+}
+
+/// Most adaptation events kept (the log is preallocated; later events are counted only).
+pub const MAX_EVENTS: usize = 256;
+
+/// The adaptive MPC controller (see module docs); implements [`SwingController`].
+pub struct AdaptiveMpc {
+    active: Box<MpcController>,
+    model: Box<LinearModel>,
+    online: OnlineDmdc,
+    synthesis: Synthesis,
+    spare: Option<Box<Job>>,
+    sources: Vec<Measured>,
+    x: Vec<f64>,
+    u_last: [f64; 2],
+    have_last: bool,
+    busy: bool,
+    retry_after: u64,
+    min_new_samples: usize,
+    retry_samples: u64,
+    tick: u64,
+    dt: f64,
+    m: usize,
+    keep_disturbance: bool,
+    events: Vec<ControllerEvent>,
+    dropped_events: usize,
+    swaps: usize,
+    rejections: usize,
+    last_rejection: [u8; 160],
+    last_rejection_len: usize,
+}
+
+impl std::fmt::Debug for AdaptiveMpc {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("AdaptiveMpc")
+            .field("active", &self.active)
+            .field("swaps", &self.swaps)
+            .field("rejections", &self.rejections)
+            .finish()
+    }
+}
+
+impl AdaptiveMpc {
+    /// Build the controller on the identified `model`: its MPC, the online estimator of the
+    /// same layout (adopting `model`) and the synthesis (a worker thread in `thread` mode).
+    pub fn new(
+        model: &LinearModel,
+        mpc: MpcSettings,
+        settings: AdaptiveSettings,
+    ) -> Result<Self, ControlError> {
+        settings.validate()?;
+        let active = Box::new(MpcController::new(model, mpc.clone())?);
+        let online = OnlineDmdc::for_model(model, settings.online.clone())?;
+        let layout = AxisLayout::from_model(model)?;
+        let sources = model
+            .states
+            .iter()
+            .map(|name| {
+                layout.classify(name).ok_or_else(|| {
+                    ControlError::Model(format!("model state '{name}' is not measured"))
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let cols = online.columns();
+        let job = || {
+            Box::new(Job {
+                factor: vec![0.0; cols * cols],
+                weight: 0.0,
+            })
+        };
+        let synth = Box::new(Synthesizer {
+            template: model.clone(),
+            mpc,
+            settings: settings.clone(),
+        });
+        let synthesis = match settings.synthesis {
+            SynthesisMode::Deferred => Synthesis::Deferred {
+                synth,
+                pending: None,
+                done: None,
+            },
+            SynthesisMode::Thread => {
+                // Capacity 2: one build and one drop may be in flight at once.
+                let (tx, jobs) = sync_channel::<ToWorker>(2);
+                let (out, rx) = sync_channel::<Outcome>(1);
+                let handle = std::thread::Builder::new()
+                    .name("swingrt-adaptive-synthesis".into())
+                    .spawn(move || {
+                        while let Ok(msg) = jobs.recv() {
+                            if let ToWorker::Build(job) = msg {
+                                if out.send(synth.run(job)).is_err() {
+                                    break;
+                                }
+                            }
+                        }
+                    })
+                    .map_err(|e| ControlError::Synthesis(format!("cannot start worker: {e}")))?;
+                Synthesis::Thread {
+                    tx: Some(tx),
+                    rx,
+                    handle: Some(handle),
+                }
+            }
+        };
+        Ok(Self {
+            active,
+            model: Box::new(model.clone()),
+            online,
+            synthesis,
+            spare: Some(job()),
+            x: vec![0.0; sources.len()],
+            sources,
+            u_last: [0.0; 2],
+            have_last: false,
+            busy: false,
+            retry_after: 0,
+            min_new_samples: settings.min_new_samples,
+            retry_samples: settings.retry_samples as u64,
+            tick: 0,
+            dt: model.dt,
+            m: model.m(),
+            keep_disturbance: model.offset != Offset::Affine,
+            events: Vec::with_capacity(MAX_EVENTS),
+            dropped_events: 0,
+            swaps: 0,
+            rejections: 0,
+            last_rejection: [0; 160],
+            last_rejection_len: 0,
+        })
+    }
+
+    /// The model the active controller was designed on.
+    pub fn model(&self) -> &LinearModel {
+        &self.model
+    }
+
+    /// The active MPC.
+    pub fn controller(&self) -> &MpcController {
+        &self.active
+    }
+
+    /// The online estimator.
+    pub fn online(&self) -> &OnlineDmdc {
+        &self.online
+    }
+
+    /// Models adopted since the start.
+    pub fn swaps(&self) -> usize {
+        self.swaps
+    }
+
+    /// Candidates rejected by the check.
+    pub fn rejections(&self) -> usize {
+        self.rejections
+    }
+
+    /// Why the last candidate was rejected (empty when none was).
+    pub fn last_rejection(&self) -> &str {
+        std::str::from_utf8(&self.last_rejection[..self.last_rejection_len]).unwrap_or("")
+    }
+
+    fn log(&mut self, what: &'static str, value: f64) {
+        if self.events.len() < MAX_EVENTS {
+            self.events.push(ControllerEvent {
+                tick: self.tick,
+                what,
+                value,
+            });
+        } else {
+            self.dropped_events += 1;
+        }
+    }
+
+    /// Dispose of a replaced object off the tick path.
+    fn discard(&mut self, trash: Box<dyn std::any::Any + Send>) {
+        match &mut self.synthesis {
+            Synthesis::Thread { tx: Some(tx), .. } => {
+                // A full channel means the worker is busy; dropping here is then the lesser evil.
+                let _ = tx.try_send(ToWorker::Drop(trash));
+            }
+            _ => drop(trash),
+        }
+    }
+
+    /// Apply a finished synthesis, if there is one.
+    fn poll(&mut self) -> Result<(), ControlError> {
+        let outcome = match &mut self.synthesis {
+            Synthesis::Thread { rx, .. } => match rx.try_recv() {
+                Ok(o) => Some(o),
+                Err(TryRecvError::Empty) => None,
+                Err(TryRecvError::Disconnected) => {
+                    return Err(ControlError::Synthesis("synthesis worker stopped".into()))
+                }
+            },
+            Synthesis::Deferred { done, .. } => done.take(),
+        };
+        let Some(outcome) = outcome else {
+            return Ok(());
+        };
+        self.busy = false;
+        self.spare = Some(outcome.job);
+        match outcome.result {
+            Ok(mut cand) => {
+                cand.mpc.take_over(&self.active, self.keep_disturbance)?;
+                self.online.adopt(&cand.model)?;
+                let Candidate { mpc, model } = *cand;
+                let old_mpc = std::mem::replace(&mut *self.active, mpc);
+                let old_model = std::mem::replace(&mut *self.model, model);
+                self.discard(Box::new((old_mpc, old_model)));
+                self.swaps += 1;
+                let overshoot = outcome.check.map_or(f64::NAN, |c| c.overshoot);
+                self.log("adopted", overshoot);
+            }
+            Err(reason) => {
+                self.rejections += 1;
+                let bytes = reason.as_bytes();
+                let mut len = bytes.len().min(self.last_rejection.len());
+                while !reason.is_char_boundary(len) {
+                    len -= 1;
+                }
+                self.last_rejection[..len].copy_from_slice(&bytes[..len]);
+                self.last_rejection_len = len;
+                self.retry_after = self.online.accepted() + self.retry_samples;
+                self.log("rejected", f64::NAN);
+                self.discard(Box::new(reason));
+            }
+        }
+        Ok(())
+    }
+
+    /// Hand the current factor to the synthesis when a rebuild is due.
+    fn maybe_request(&mut self) {
+        let o = &self.online;
+        let due = !self.busy
+            && o.fired()
+            && o.excited()
+            && o.accepted_since_fire() >= self.min_new_samples
+            && o.accepted() >= self.retry_after;
+        if !due {
+            return;
+        }
+        let Some(mut job) = self.spare.take() else {
+            return;
+        };
+        job.factor.copy_from_slice(self.online.factor());
+        job.weight = self.online.weight();
+        let sent = match &mut self.synthesis {
+            Synthesis::Thread { tx: Some(tx), .. } => match tx.try_send(ToWorker::Build(job)) {
+                Ok(()) => true,
+                Err(TrySendError::Full(msg) | TrySendError::Disconnected(msg)) => {
+                    if let ToWorker::Build(job) = msg {
+                        self.spare = Some(job);
+                    }
+                    false
+                }
+            },
+            Synthesis::Thread { tx: None, .. } => {
+                self.spare = Some(job);
+                false
+            }
+            Synthesis::Deferred { pending, .. } => {
+                *pending = Some(job);
+                true
+            }
+        };
+        if sent {
+            self.busy = true;
+            self.log("requested", self.online.weight());
+        }
+    }
+}
+
+impl Drop for AdaptiveMpc {
+    fn drop(&mut self) {
+        if let Synthesis::Thread { tx, handle, .. } = &mut self.synthesis {
+            drop(tx.take());
+            if let Some(h) = handle.take() {
+                let _ = h.join();
+            }
+        }
+    }
+}
+
+impl SwingController for AdaptiveMpc {
+    fn axes(&self) -> usize {
+        self.m
+    }
+
+    fn period(&self) -> f64 {
+        self.dt
+    }
+
+    fn reset(&mut self, state: &[AxisState], acc: &[f64]) {
+        self.active.reset(state, acc);
+        self.online.restart_history();
+        for a in 0..self.m {
+            let u = acc.get(a).copied().unwrap_or(0.0);
+            self.u_last[a] = if u.is_finite() { u } else { 0.0 };
+        }
+        self.have_last = true;
+        // The reset frame starts the online history too.
+        if fill_frame(&self.sources, state, &mut self.x) {
+            let _ = self.online.update(&self.x, &self.u_last[..self.m]);
+        }
+    }
+
+    fn step(
+        &mut self,
+        state: &[AxisState],
+        vel_ref: &[f64],
+        acc_out: &mut [f64],
+    ) -> Result<TickInfo, ControlError> {
+        super::check_tick_inputs(self.m, state, vel_ref, acc_out)?;
+        self.tick += 1;
+        if self.have_last && fill_frame(&self.sources, state, &mut self.x) {
+            let st = self.online.update(&self.x, &self.u_last[..self.m])?;
+            if st.fired {
+                self.log("detected", st.statistic);
+            }
+        }
+        self.poll()?;
+        let info = self.active.step(state, vel_ref, acc_out)?;
+        self.u_last[..self.m].copy_from_slice(acc_out);
+        self.have_last = true;
+        self.maybe_request();
+        Ok(info)
+    }
+
+    fn prediction(&mut self) -> Option<Vec<f64>> {
+        self.active.prediction()
+    }
+
+    fn between_ticks(&mut self) {
+        if let Synthesis::Deferred {
+            synth,
+            pending,
+            done,
+        } = &mut self.synthesis
+        {
+            if let Some(job) = pending.take() {
+                *done = Some(synth.run(job));
+            }
+        }
+    }
+
+    fn events(&self) -> Vec<ControllerEvent> {
+        self.events.clone()
+    }
+}
+
+/// The model's state vector from the axis measurements; false when one is not finite.
+fn fill_frame(sources: &[Measured], state: &[AxisState], x: &mut [f64]) -> bool {
+    for (v, src) in x.iter_mut().zip(sources) {
+        let s = match *src {
+            Measured::V(a) | Measured::Swing(a) | Measured::SwingRate(a) => state.get(a),
+        };
+        let Some(s) = s else { return false };
+        *v = match *src {
+            Measured::V(_) => s.v,
+            Measured::Swing(_) => s.swing,
+            Measured::SwingRate(_) => s.swing_rate,
+        };
+    }
+    x.iter().all(|v| v.is_finite())
+}
