@@ -78,6 +78,13 @@ pub struct AdaptiveSettings {
     pub max_spectral_radius: f64,
     /// Where the synthesis runs: `deferred` (simulation) or `thread` (real time).
     pub synthesis: SynthesisMode,
+    /// Amplitude of a probing input added to the command from a detection until the next
+    /// adoption [m/s²] (0 = off, the default): a pseudo-random ±amplitude sequence held for
+    /// `probe_hold` ticks, which breaks the collinearity of input and state that feedback
+    /// leaves in closed-loop data.
+    pub probe_amplitude: f64,
+    /// Ticks each probing level is held [ticks].
+    pub probe_hold: usize,
 }
 
 impl Default for AdaptiveSettings {
@@ -92,6 +99,8 @@ impl Default for AdaptiveSettings {
             bounds: CheckBounds::default(),
             max_spectral_radius: 1.001,
             synthesis: SynthesisMode::Deferred,
+            probe_amplitude: 0.0,
+            probe_hold: 5,
         }
     }
 }
@@ -125,6 +134,10 @@ impl AdaptiveSettings {
             positive(name, v)?;
         }
         positive("max_spectral_radius", self.max_spectral_radius)?;
+        crate::config::in_range("probe_amplitude", self.probe_amplitude, 0.0, 2.0)?;
+        if self.probe_hold == 0 {
+            return Err(ConfigError::new("probe_hold", "must be at least 1 tick"));
+        }
         Ok(())
     }
 }
@@ -135,23 +148,33 @@ struct Job {
     weight: f64,
 }
 
-/// A candidate that passed the check.
+/// A candidate that passed the check (boxed so that the swap moves pointers only).
 struct Candidate {
-    mpc: MpcController,
-    model: LinearModel,
+    mpc: Box<MpcController>,
+    model: Box<LinearModel>,
 }
 
 /// What a synthesis returns; `job` comes back for reuse.
 struct Outcome {
     job: Box<Job>,
-    result: Result<Box<Candidate>, String>,
+    result: Result<Candidate, String>,
     check: Option<StepCheck>,
 }
 
 /// Messages to the worker.
 enum ToWorker {
     Build(Box<Job>),
-    Drop(#[allow(dead_code)] Box<dyn std::any::Any + Send>),
+    /// Replaced objects, dropped on the worker.
+    Retire(#[allow(dead_code)] Retired),
+}
+
+/// What a swap or a rejection leaves behind.
+enum Retired {
+    Controller(
+        #[allow(dead_code)] Box<MpcController>,
+        #[allow(dead_code)] Box<LinearModel>,
+    ),
+    Reason(#[allow(dead_code)] String),
 }
 
 /// What the synthesis needs besides the factor: fixed for the controller's life.
@@ -168,14 +191,11 @@ impl Synthesizer {
         Outcome { job, result, check }
     }
 
-    fn build(
-        &self,
-        job: &Job,
-        check_out: &mut Option<StepCheck>,
-    ) -> Result<Box<Candidate>, String> {
+    fn build(&self, job: &Job, check_out: &mut Option<StepCheck>) -> Result<Candidate, String> {
         let t = &self.template;
         let full = t.m() + usize::from(t.offset == Offset::Affine) + t.n() * t.delays;
-        let rank = t.rank.clamp(1, full);
+        // Rank 0 marks a full-rank model.
+        let rank = if t.rank == 0 { full } else { t.rank.min(full) };
         let model =
             model_from_factor(&job.factor, job.weight, rank, t).map_err(|e| e.to_string())?;
         let rho = model.spectral_radius().map_err(|e| e.to_string())?;
@@ -219,7 +239,10 @@ impl Synthesizer {
                 worst.overshoot, worst.final_error, worst.hold_drift
             ));
         }
-        Ok(Box::new(Candidate { mpc, model }))
+        Ok(Candidate {
+            mpc: Box::new(mpc),
+            model: Box::new(model),
+        })
     }
 }
 
@@ -254,6 +277,10 @@ pub struct AdaptiveMpc {
     retry_after: u64,
     min_new_samples: usize,
     retry_samples: u64,
+    probe_amplitude: f64,
+    probe_hold: u64,
+    probe_state: u64,
+    probe_level: f64,
     tick: u64,
     dt: f64,
     m: usize,
@@ -352,6 +379,10 @@ impl AdaptiveMpc {
             retry_after: 0,
             min_new_samples: settings.min_new_samples,
             retry_samples: settings.retry_samples as u64,
+            probe_amplitude: settings.probe_amplitude,
+            probe_hold: settings.probe_hold as u64,
+            probe_state: 0x9e37_79b9_7f4a_7c15,
+            probe_level: 0.0,
             tick: 0,
             dt: model.dt,
             m: model.m(),
@@ -408,11 +439,11 @@ impl AdaptiveMpc {
     }
 
     /// Dispose of a replaced object off the tick path.
-    fn discard(&mut self, trash: Box<dyn std::any::Any + Send>) {
+    fn discard(&mut self, trash: Retired) {
         match &mut self.synthesis {
             Synthesis::Thread { tx: Some(tx), .. } => {
                 // A full channel means the worker is busy; dropping here is then the lesser evil.
-                let _ = tx.try_send(ToWorker::Drop(trash));
+                let _ = tx.try_send(ToWorker::Retire(trash));
             }
             _ => drop(trash),
         }
@@ -436,13 +467,12 @@ impl AdaptiveMpc {
         self.busy = false;
         self.spare = Some(outcome.job);
         match outcome.result {
-            Ok(mut cand) => {
-                cand.mpc.take_over(&self.active, self.keep_disturbance)?;
-                self.online.adopt(&cand.model)?;
-                let Candidate { mpc, model } = *cand;
-                let old_mpc = std::mem::replace(&mut *self.active, mpc);
-                let old_model = std::mem::replace(&mut *self.model, model);
-                self.discard(Box::new((old_mpc, old_model)));
+            Ok(Candidate { mut mpc, model }) => {
+                mpc.take_over(&self.active, self.keep_disturbance)?;
+                self.online.adopt(&model)?;
+                let old_mpc = std::mem::replace(&mut self.active, mpc);
+                let old_model = std::mem::replace(&mut self.model, model);
+                self.discard(Retired::Controller(old_mpc, old_model));
                 self.swaps += 1;
                 let overshoot = outcome.check.map_or(f64::NAN, |c| c.overshoot);
                 self.log("adopted", overshoot);
@@ -458,7 +488,7 @@ impl AdaptiveMpc {
                 self.last_rejection_len = len;
                 self.retry_after = self.online.accepted() + self.retry_samples;
                 self.log("rejected", f64::NAN);
-                self.discard(Box::new(reason));
+                self.discard(Retired::Reason(reason));
             }
         }
         Ok(())
@@ -556,6 +586,20 @@ impl SwingController for AdaptiveMpc {
         }
         self.poll()?;
         let info = self.active.step(state, vel_ref, acc_out)?;
+        if self.probe_amplitude > 0.0 && self.online.fired() {
+            if self.tick % self.probe_hold == 0 {
+                // xorshift64: a fixed-seed pseudo-random sign per hold.
+                let mut x = self.probe_state;
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                self.probe_state = x;
+                self.probe_level = if x & 1 == 0 { 1.0 } else { -1.0 } * self.probe_amplitude;
+            }
+            for u in acc_out.iter_mut() {
+                *u += self.probe_level;
+            }
+        }
         self.u_last[..self.m].copy_from_slice(acc_out);
         self.have_last = true;
         self.maybe_request();

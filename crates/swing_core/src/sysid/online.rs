@@ -31,9 +31,12 @@
 //! fit to noise.
 //!
 //! Change detection. The residual of the *adopted* model (the one the controller flies),
-//! e_k = x_{k+1} − G_adopted φ_k, is normalised by the residual variance σ²_i of the fit at
-//! adoption (floored at `residual_floor`²): z_k = (1/n) Σ_i e_{k,i}² / σ²_i, which is ≈ 1
-//! while the model is right. A one-sided CUSUM s_k = max(0, s_{k−1} + z_k − 1 − ν) fires
+//! e_k = x_{k+1} − G_adopted φ_k, is normalised by σ²_i, the larger of `residual_floor`²,
+//! the fit's weighted residual variance at adoption, and the mean e_i² over quiet samples
+//! (full window, gate closed; a running mean over the last ≈ W of them):
+//! z_k = (1/n) Σ_i e_{k,i}² / σ²_i. In quiet flight a wrong model predicts about as well as a
+//! right one, so quiet samples measure the noise the fit never saw (hover on a noisy
+//! velocity estimate), and only excited samples feed the detector. A one-sided CUSUM s_k = max(0, s_{k−1} + z_k − 1 − ν) fires
 //! when s_k > h (ν = `cusum_drift`, h = `cusum_threshold`). On a fire the past information
 //! is discounted once by `change_discount` (covariance resetting) so that the post-change
 //! data dominate the estimate after a few hundred samples instead of 1/(1 − λ).
@@ -60,7 +63,8 @@ pub struct OnlineSettings {
     /// Length of the persistence-of-excitation window [samples].
     pub pe_window: usize,
     /// Least standard deviation of every input over the window [input units, m/s²]
-    /// (0 = no input check).
+    /// (0 = no input check); must sit above what noise alone makes the controller do in
+    /// hover (≈ 0.17 m/s² for the default MPC on 0.01 m/s of velocity noise).
     pub pe_input_std: f64,
     /// Least eigenvalue of the window's input-state correlation matrix [dimensionless, 0–1]
     /// (0 = no conditioning check).
@@ -83,7 +87,7 @@ impl Default for OnlineSettings {
             forgetting: 0.998,
             prior: 1e-6,
             pe_window: 100,
-            pe_input_std: 0.1,
+            pe_input_std: 0.3,
             pe_min_eig: 1e-3,
             cusum_drift: 2.0,
             cusum_threshold: 60.0,
@@ -168,6 +172,11 @@ pub struct OnlineDmdc {
     /// Residual standard deviation per state at adoption.
     sigma: Vec<f64>,
     cusum: f64,
+    /// Residual level of the fit at adoption (floored), per state.
+    sigma_fit: Vec<f64>,
+    /// Running mean of e² over quiet samples, and how many it has seen.
+    quiet_ms: Vec<f64>,
+    quiet_count: usize,
     fired: bool,
     since_fire: usize,
     accepted: u64,
@@ -238,6 +247,9 @@ impl OnlineDmdc {
             has_adopted: false,
             sigma: vec![settings.residual_floor; n],
             cusum: 0.0,
+            sigma_fit: vec![settings.residual_floor; n],
+            quiet_ms: vec![0.0; n],
+            quiet_count: 0,
             fired: false,
             since_fire: 0,
             accepted: 0,
@@ -383,7 +395,8 @@ impl OnlineDmdc {
             } else {
                 0.0
             };
-            self.sigma[i] = var.sqrt().max(floor);
+            self.sigma_fit[i] = var.sqrt().max(floor);
+            self.sigma[i] = self.sigma_fit[i].max(self.quiet_ms[i].sqrt());
         }
         self.cusum = 0.0;
         self.fired = false;
@@ -424,15 +437,27 @@ impl OnlineDmdc {
             self.row[r..c].copy_from_slice(x);
             step.regressed = true;
             if self.has_adopted && self.settings.cusum_threshold > 0.0 {
+                let quiet = !self.excited && self.ring_len == self.settings.pe_window;
                 let mut z = 0.0;
+                if quiet {
+                    self.quiet_count += 1;
+                }
+                let alpha = 1.0 / (self.quiet_count.min(self.settings.pe_window).max(1) as f64);
                 for i in 0..n {
                     let g = &self.adopted[i * r..(i + 1) * r];
                     let pred: f64 = g.iter().zip(&self.row[..r]).map(|(a, b)| a * b).sum();
-                    z += ((x[i] - pred) / self.sigma[i]).powi(2);
+                    let e2 = (x[i] - pred).powi(2);
+                    if quiet {
+                        self.quiet_ms[i] += alpha * (e2 - self.quiet_ms[i]);
+                        self.sigma[i] = self.sigma_fit[i].max(self.quiet_ms[i].sqrt());
+                    }
+                    z += e2 / (self.sigma[i] * self.sigma[i]);
                 }
                 z /= n as f64;
                 step.residual = z;
-                self.cusum = (self.cusum + z - 1.0 - self.settings.cusum_drift).max(0.0);
+                if self.excited {
+                    self.cusum = (self.cusum + z - 1.0 - self.settings.cusum_drift).max(0.0);
+                }
                 if !self.fired && self.cusum > self.settings.cusum_threshold {
                     self.fired = true;
                     self.since_fire = 0;
@@ -937,7 +962,7 @@ mod tests {
         let settings = OnlineSettings {
             forgetting: 0.99,
             prior: 1e-6,
-            pe_input_std: 0.1,
+            pe_input_std: 0.3,
             pe_min_eig: 1e-3,
             pe_window: 50,
             cusum_drift: 2.0,
