@@ -19,6 +19,7 @@ __all__ = [
     "Simulator",
     "TRACE_COLUMNS",
     "__version__",
+    "adaptive_timing",
     "care",
     "check_settings",
     "dare",
@@ -98,6 +99,15 @@ class Simulator:
     def attach_lqr(
         self, params: Any, axes: int, settings: Any, engage_at: float, budget: float
     ) -> None: ...
+    def attach_adaptive_mpc(
+        self,
+        model: LinearModel,
+        settings: Any,
+        adaptive: Any,
+        engage_at: float,
+        budget: float,
+    ) -> None: ...
+    def controller_events(self) -> list[tuple[float, str, float]]: ...
     def controller_prediction(self) -> npt.NDArray[np.float64] | None: ...
 
 # --- system identification ---------------------------------------------------------------
@@ -152,6 +162,13 @@ class Search:
     def best(self) -> int: ...
 
 def check_settings(section: str, settings: Any = None) -> dict[str, Any]: ...
+def adaptive_timing(
+    model: LinearModel,
+    settings: Any = None,
+    adaptive: Any = None,
+    n_ticks: int = 2000,
+    repeats: int = 5,
+) -> dict[str, dict[str, float]]: ...
 def identify(
     x: npt.NDArray[np.float64],
     u: npt.NDArray[np.float64],

@@ -352,6 +352,37 @@ fn mpc_tick_timing<'py>(
     Ok(d)
 }
 
+/// Timing of the adaptive MPC (`control::adaptive::adaptive_timing`): the tick with the
+/// online update over `n_ticks` ticks [µs] and the re-synthesis `repeats` times [ms].
+#[pyfunction]
+#[pyo3(signature = (model, settings=None, adaptive=None, n_ticks=2000, repeats=5))]
+fn adaptive_timing<'py>(
+    py: Python<'py>,
+    model: &PyLinearModel,
+    settings: Option<&Bound<'py, PyAny>>,
+    adaptive: Option<&Bound<'py, PyAny>>,
+    n_ticks: usize,
+    repeats: usize,
+) -> PyResult<Bound<'py, PyDict>> {
+    let model = model.inner.clone();
+    let s: MpcSettings = convert::settings(settings, "settings")?;
+    let a: swing_core::control::AdaptiveSettings = convert::settings(adaptive, "adaptive")?;
+    let (tick, build) = py
+        .detach(|| swing_core::control::adaptive::adaptive_timing(&model, &s, &a, n_ticks, repeats))
+        .map_err(to_py)?;
+    let d = PyDict::new(py);
+    for (key, t) in [("tick_us", tick), ("resynthesis_ms", build)] {
+        let e = PyDict::new(py);
+        e.set_item("median", t.median_us)?;
+        e.set_item("p99", t.p99_us)?;
+        e.set_item("max", t.max_us)?;
+        e.set_item("mean", t.mean_us)?;
+        e.set_item("count", t.ticks)?;
+        d.set_item(key, e)?;
+    }
+    Ok(d)
+}
+
 /// The white-box pendulum fitted in `delays` delay coordinates (seeded): a realistic
 /// stand-in for an identified model in benchmarks and tests.
 #[pyfunction]
@@ -438,6 +469,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(care, m)?)?;
     m.add_function(wrap_pyfunction!(dare, m)?)?;
     m.add_function(wrap_pyfunction!(mpc_tick_timing, m)?)?;
+    m.add_function(wrap_pyfunction!(adaptive_timing, m)?)?;
     m.add_function(wrap_pyfunction!(pendulum_model, m)?)?;
     m.add_function(wrap_pyfunction!(mpc_step_check, m)?)?;
     m.add_function(wrap_pyfunction!(step_overshoot, m)?)?;

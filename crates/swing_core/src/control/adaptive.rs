@@ -29,12 +29,17 @@
 //! Replaced controllers and models are dropped on the worker, not on the tick.
 
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TryRecvError, TrySendError};
+use std::sync::Arc;
 use std::thread::JoinHandle;
 
 use serde::{Deserialize, Serialize};
 
+use std::time::Instant;
+
 use super::check::{step_check_with, StepCheck, StepCheckSettings};
 use super::layout::{AxisLayout, Measured};
+use super::mpc::timing::TickTiming;
+use super::plant::LinearPlant;
 use super::selection::CheckBounds;
 use super::{
     AxisState, ControlError, ControllerEvent, MpcController, MpcSettings, SwingController, TickInfo,
@@ -253,7 +258,6 @@ enum Synthesis {
         handle: Option<JoinHandle<()>>,
     },
     Deferred {
-        synth: Box<Synthesizer>,
         pending: Option<Box<Job>>,
         done: Option<Outcome>,
     },
@@ -267,6 +271,7 @@ pub struct AdaptiveMpc {
     active: Box<MpcController>,
     model: Box<LinearModel>,
     online: OnlineDmdc,
+    synth: Arc<Synthesizer>,
     synthesis: Synthesis,
     spare: Option<Box<Job>>,
     sources: Vec<Measured>,
@@ -331,14 +336,13 @@ impl AdaptiveMpc {
                 weight: 0.0,
             })
         };
-        let synth = Box::new(Synthesizer {
+        let synth = Arc::new(Synthesizer {
             template: model.clone(),
             mpc,
             settings: settings.clone(),
         });
         let synthesis = match settings.synthesis {
             SynthesisMode::Deferred => Synthesis::Deferred {
-                synth,
                 pending: None,
                 done: None,
             },
@@ -346,6 +350,7 @@ impl AdaptiveMpc {
                 // Capacity 2: one build and one drop may be in flight at once.
                 let (tx, jobs) = sync_channel::<ToWorker>(2);
                 let (out, rx) = sync_channel::<Outcome>(1);
+                let synth = Arc::clone(&synth);
                 let handle = std::thread::Builder::new()
                     .name("swingrt-adaptive-synthesis".into())
                     .spawn(move || {
@@ -369,6 +374,7 @@ impl AdaptiveMpc {
             active,
             model: Box::new(model.clone()),
             online,
+            synth,
             synthesis,
             spare: Some(job()),
             x: vec![0.0; sources.len()],
@@ -424,6 +430,17 @@ impl AdaptiveMpc {
     /// Why the last candidate was rejected (empty when none was).
     pub fn last_rejection(&self) -> &str {
         std::str::from_utf8(&self.last_rejection[..self.last_rejection_len]).unwrap_or("")
+    }
+
+    /// Run the re-synthesis on the current factor now, on this thread (benchmarks, tests):
+    /// the candidate model, or why it was refused.
+    pub fn synthesize_now(&self) -> Result<LinearModel, String> {
+        let cols = self.online.columns();
+        let job = Box::new(Job {
+            factor: self.online.factor()[..cols * cols].to_vec(),
+            weight: self.online.weight(),
+        });
+        self.synth.run(job).result.map(|c| *c.model)
     }
 
     fn log(&mut self, what: &'static str, value: f64) {
@@ -611,14 +628,9 @@ impl SwingController for AdaptiveMpc {
     }
 
     fn between_ticks(&mut self) {
-        if let Synthesis::Deferred {
-            synth,
-            pending,
-            done,
-        } = &mut self.synthesis
-        {
+        if let Synthesis::Deferred { pending, done } = &mut self.synthesis {
             if let Some(job) = pending.take() {
-                *done = Some(synth.run(job));
+                *done = Some(self.synth.run(job));
             }
         }
     }
@@ -642,4 +654,70 @@ fn fill_frame(sources: &[Measured], state: &[AxisState], x: &mut [f64]) -> bool 
         };
     }
     x.iter().all(|v| v.is_finite())
+}
+
+/// Timing of the adaptive MPC for `swingrt bench` and the criterion bench: the tick with
+/// the online update ([`TickTiming`] in µs) over `n_ticks` ticks in closed loop with
+/// `model` itself as the plant under a ±2 m/s square wave of references (every sample
+/// excited and accepted), then the re-synthesis on the collected factor, `repeats` times
+/// ([`TickTiming`] in ms).
+pub fn adaptive_timing(
+    model: &LinearModel,
+    mpc: &MpcSettings,
+    settings: &AdaptiveSettings,
+    n_ticks: usize,
+    repeats: usize,
+) -> Result<(TickTiming, TickTiming), ControlError> {
+    if n_ticks == 0 || repeats == 0 {
+        return Err(ControlError::Input(
+            "n_ticks and repeats must be ≥ 1".into(),
+        ));
+    }
+    let s = AdaptiveSettings {
+        synthesis: SynthesisMode::Deferred,
+        ..settings.clone()
+    };
+    let mut ctrl = AdaptiveMpc::new(model, mpc.clone(), s)?;
+    let mut plant = LinearPlant::new(model)?;
+    let m = ctrl.axes();
+    let mut state = vec![AxisState::default(); m];
+    let mut refs = vec![0.0; m];
+    let mut u = vec![0.0; m];
+    plant.measure(&mut state);
+    ctrl.reset(&state, &u);
+    let half_period = (4.0 / model.dt).round().max(1.0) as usize;
+    let mut ticks = Vec::with_capacity(n_ticks);
+    for k in 0..n_ticks {
+        let sign = if (k / half_period) % 2 == 0 {
+            1.0
+        } else {
+            -1.0
+        };
+        refs.iter_mut().for_each(|r| *r = 2.0 * sign);
+        plant.measure(&mut state);
+        let t0 = Instant::now();
+        ctrl.step(&state, &refs, &mut u)?;
+        ticks.push(t0.elapsed().as_secs_f64() * 1e6);
+        plant.step(&u);
+    }
+    let mut builds = Vec::with_capacity(repeats);
+    for _ in 0..repeats {
+        let t0 = Instant::now();
+        let out = ctrl.synthesize_now();
+        builds.push(t0.elapsed().as_secs_f64() * 1e3);
+        std::hint::black_box(&out);
+    }
+    Ok((summarise(ticks), summarise(builds)))
+}
+
+fn summarise(mut times: Vec<f64>) -> TickTiming {
+    times.sort_by(|a, b| a.total_cmp(b));
+    let pick = |q: f64| times[((times.len() - 1) as f64 * q).round() as usize];
+    TickTiming {
+        median_us: pick(0.5),
+        p99_us: pick(0.99),
+        max_us: *times.last().unwrap_or(&0.0),
+        mean_us: times.iter().sum::<f64>() / times.len() as f64,
+        ticks: times.len(),
+    }
 }
