@@ -16,8 +16,8 @@
 //!
 //! Check before a swap (`control::check`, bounds of `control::selection`): the candidate's
 //! spectral radius is at most `max_spectral_radius`, and its MPC, in closed loop on the
-//! candidate model itself and on the candidate with extra vehicle drag, each behind every
-//! input lag, holds hover, tracks a velocity step and stays within `bounds`. A candidate
+//! candidate model itself and on the candidate with extra vehicle drag (both without the
+//! constant term, which is the recent data's operating point), each behind every input lag, holds hover, tracks a velocity step and stays within `bounds`. A candidate
 //! that fails is dropped and the old controller kept; the synthesis retries after
 //! `retry_samples` more excited samples.
 //!
@@ -102,7 +102,7 @@ impl Default for AdaptiveSettings {
             input_lags: vec![0.0, 0.1],
             check_drag: 0.12,
             bounds: CheckBounds::default(),
-            max_spectral_radius: 1.001,
+            max_spectral_radius: 1.005,
             synthesis: SynthesisMode::Deferred,
             probe_amplitude: 0.0,
             probe_hold: 5,
@@ -210,15 +210,21 @@ impl Synthesizer {
                 self.settings.max_spectral_radius
             ));
         }
-        let mut mpc = MpcController::new(&model, self.mpc.clone()).map_err(|e| e.to_string())?;
-        let mut plants = vec![model.clone()];
+        // The refit's constant term is the operating point of the recent data (drag at
+        // cruise, a thrust offset). In the check (a plant started at rest) it would be a
+        // disturbance the hold phase measures instead of the dynamics, so the check flies an
+        // MPC designed on the model without it, on plants without it; the MPC swapped in is
+        // designed on the model as fitted.
+        let mut bare = model.clone();
+        bare.c.fill(0.0);
+        let mut plants = vec![bare.clone()];
         if self.settings.check_drag > 0.0 {
             plants.push(
-                model
-                    .with_velocity_drag(self.settings.check_drag)
+                bare.with_velocity_drag(self.settings.check_drag)
                     .map_err(|e| e.to_string())?,
             );
         }
+        let mut checked = MpcController::new(&bare, self.mpc.clone()).map_err(|e| e.to_string())?;
         let mut worst = StepCheck {
             overshoot: f64::NEG_INFINITY,
             final_error: f64::NEG_INFINITY,
@@ -231,7 +237,8 @@ impl Synthesizer {
                     input_lag,
                     ..StepCheckSettings::default()
                 };
-                let r = step_check_with(&mut mpc, &model, plant, &c).map_err(|e| e.to_string())?;
+                let r =
+                    step_check_with(&mut checked, &bare, plant, &c).map_err(|e| e.to_string())?;
                 worst.overshoot = worst.overshoot.max(r.overshoot);
                 worst.final_error = worst.final_error.max(r.final_error);
                 worst.hold_drift = worst.hold_drift.max(r.hold_drift);
@@ -244,6 +251,11 @@ impl Synthesizer {
                 worst.overshoot, worst.final_error, worst.hold_drift
             ));
         }
+        let mpc = if model.c.iter().all(|v| *v == 0.0) {
+            checked
+        } else {
+            MpcController::new(&model, self.mpc.clone()).map_err(|e| e.to_string())?
+        };
         Ok(Candidate {
             mpc: Box::new(mpc),
             model: Box::new(model),
@@ -504,7 +516,12 @@ impl AdaptiveMpc {
                 self.last_rejection[..len].copy_from_slice(&bytes[..len]);
                 self.last_rejection_len = len;
                 self.retry_after = self.online.accepted() + self.retry_samples;
-                self.log("rejected", f64::NAN);
+                // The value says which test refused it: the check's worst miss ratio, or
+                // NaN when the model itself was refused (unstable, no design).
+                let miss = outcome
+                    .check
+                    .map_or(f64::NAN, |c| self.synth.settings.bounds.miss(&c));
+                self.log("rejected", miss);
                 self.discard(Retired::Reason(reason));
             }
         }

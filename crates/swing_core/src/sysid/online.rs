@@ -30,14 +30,16 @@
 //! a constant input leaves the estimate untouched instead of slowly replacing it with a
 //! fit to noise.
 //!
-//! Change detection. The residual of the *adopted* model (the one the controller flies),
-//! e_k = x_{k+1} − G_adopted φ_k, is normalised by σ²_i, the larger of `residual_floor`²,
+//! Change detection. The adopted model (the one the controller flies) runs free on the
+//! applied inputs from the measured history for h = `detector_horizon` samples; its error
+//! e = x_{k+h} − x̂_{k+h|k} (a one-step residual is too forgiving for delay models, whose
+//! recent history already carries most of the next sample) is normalised by σ²_i, the larger of `residual_floor`²,
 //! the fit's weighted residual variance at adoption, and the mean e_i² over quiet samples
 //! (full window, gate closed; a running mean over the last ≈ W of them):
 //! z_k = (1/n) Σ_i e_{k,i}² / σ²_i. In quiet flight a wrong model predicts about as well as a
 //! right one, so quiet samples measure the noise the fit never saw (hover on a noisy
 //! velocity estimate), and only excited samples feed the detector. A one-sided CUSUM s_k = max(0, s_{k−1} + z_k − 1 − ν) fires
-//! when s_k > h (ν = `cusum_drift`, h = `cusum_threshold`). On a fire the past information
+//! (once per comparison) when s_k > H (ν = `cusum_drift`, H = `cusum_threshold`). On a fire the past information
 //! is discounted once by `change_discount` (covariance resetting) so that the post-change
 //! data dominate the estimate after a few hundred samples instead of 1/(1 − λ).
 
@@ -69,6 +71,9 @@ pub struct OnlineSettings {
     /// Least eigenvalue of the window's input-state correlation matrix [dimensionless, 0–1]
     /// (0 = no conditioning check).
     pub pe_min_eig: f64,
+    /// Samples h the adopted model runs free on the applied inputs before its prediction is
+    /// compared with the measurement [samples] (1 = one-step residual).
+    pub detector_horizon: usize,
     /// CUSUM drift ν on the normalised squared residual [dimensionless].
     pub cusum_drift: f64,
     /// CUSUM threshold h [dimensionless]; 0 disables the detector.
@@ -89,9 +94,10 @@ impl Default for OnlineSettings {
             pe_window: 100,
             pe_input_std: 0.3,
             pe_min_eig: 1e-3,
+            detector_horizon: 10,
             cusum_drift: 2.0,
-            cusum_threshold: 60.0,
-            residual_floor: 2e-3,
+            cusum_threshold: 30.0,
+            residual_floor: 1e-3,
             change_discount: 0.01,
         }
     }
@@ -119,6 +125,15 @@ impl OnlineSettings {
         }
         non_negative("pe_input_std", self.pe_input_std)?;
         in_range("pe_min_eig", self.pe_min_eig, 0.0, 1.0)?;
+        if self.detector_horizon == 0 || self.detector_horizon > 10_000 {
+            return Err(ConfigError::new(
+                "detector_horizon",
+                format!(
+                    "must be between 1 and 10000 samples (got {})",
+                    self.detector_horizon
+                ),
+            ));
+        }
         non_negative("cusum_drift", self.cusum_drift)?;
         non_negative("cusum_threshold", self.cusum_threshold)?;
         positive("residual_floor", self.residual_floor)?;
@@ -177,6 +192,11 @@ pub struct OnlineDmdc {
     /// Running mean of e² over quiet samples, and how many it has seen.
     quiet_ms: Vec<f64>,
     quiet_count: usize,
+    /// The adopted model's free run: its history (newest first), regressor and age.
+    sim_hist: Vec<f64>,
+    sim_row: Vec<f64>,
+    sim_count: usize,
+    sim_valid: bool,
     fired: bool,
     since_fire: usize,
     accepted: u64,
@@ -250,6 +270,10 @@ impl OnlineDmdc {
             sigma_fit: vec![settings.residual_floor; n],
             quiet_ms: vec![0.0; n],
             quiet_count: 0,
+            sim_hist: vec![0.0; n * q],
+            sim_row: vec![0.0; m + usize::from(offset == Offset::Affine) + n * q],
+            sim_count: 0,
+            sim_valid: false,
             fired: false,
             since_fire: 0,
             accepted: 0,
@@ -338,6 +362,7 @@ impl OnlineDmdc {
     /// Forget the history of states (e.g. after a gap in the data); the factor is kept.
     pub fn restart_history(&mut self) {
         self.frames = 0;
+        self.sim_valid = false;
         self.ring_len = 0;
         self.ring_pos = 0;
         self.excited = false;
@@ -401,6 +426,7 @@ impl OnlineDmdc {
         self.cusum = 0.0;
         self.fired = false;
         self.since_fire = 0;
+        self.sim_valid = false;
     }
 
     /// One new sample: `x` is the newest state x_{k+1}, `u` the input applied between the
@@ -437,33 +463,7 @@ impl OnlineDmdc {
             self.row[r..c].copy_from_slice(x);
             step.regressed = true;
             if self.has_adopted && self.settings.cusum_threshold > 0.0 {
-                let quiet = !self.excited && self.ring_len == self.settings.pe_window;
-                let mut z = 0.0;
-                if quiet {
-                    self.quiet_count += 1;
-                }
-                let alpha = 1.0 / (self.quiet_count.min(self.settings.pe_window).max(1) as f64);
-                for i in 0..n {
-                    let g = &self.adopted[i * r..(i + 1) * r];
-                    let pred: f64 = g.iter().zip(&self.row[..r]).map(|(a, b)| a * b).sum();
-                    let e2 = (x[i] - pred).powi(2);
-                    if quiet {
-                        self.quiet_ms[i] += alpha * (e2 - self.quiet_ms[i]);
-                        self.sigma[i] = self.sigma_fit[i].max(self.quiet_ms[i].sqrt());
-                    }
-                    z += e2 / (self.sigma[i] * self.sigma[i]);
-                }
-                z /= n as f64;
-                step.residual = z;
-                if self.excited {
-                    self.cusum = (self.cusum + z - 1.0 - self.settings.cusum_drift).max(0.0);
-                }
-                if !self.fired && self.cusum > self.settings.cusum_threshold {
-                    self.fired = true;
-                    self.since_fire = 0;
-                    step.fired = true;
-                    self.discount(self.settings.change_discount);
-                }
+                self.detect(x, u, &mut step);
             }
             step.statistic = self.cusum;
             if self.excited {
@@ -478,6 +478,67 @@ impl OnlineDmdc {
         self.history[..n].copy_from_slice(x);
         self.frames = (self.frames + 1).min(q + 1);
         Ok(step)
+    }
+
+    /// The detector's share of an update: advance the adopted model's free run by one
+    /// sample with the applied input; every `detector_horizon` samples compare it with the
+    /// measurement, update σ (quiet samples) or the CUSUM (excited ones), and restart the
+    /// run from the measured history.
+    fn detect(&mut self, x: &[f64], u: &[f64], step: &mut OnlineStep) {
+        let (n, m, q, r) = (self.n, self.m, self.q, self.r);
+        if !self.sim_valid {
+            self.sim_hist.copy_from_slice(&self.history);
+            self.sim_count = 0;
+            self.sim_valid = true;
+        }
+        for j in 0..m {
+            self.sim_row[j] = u[j] - self.input_mean[j];
+        }
+        let lead = m + usize::from(self.affine);
+        if self.affine {
+            self.sim_row[m] = 1.0;
+        }
+        self.sim_row[lead..lead + n * q].copy_from_slice(&self.sim_hist);
+        if q > 1 {
+            self.sim_hist.copy_within(0..n * (q - 1), n);
+        }
+        for i in 0..n {
+            let g = &self.adopted[i * r..(i + 1) * r];
+            self.sim_hist[i] = g.iter().zip(&self.sim_row).map(|(a, b)| a * b).sum();
+        }
+        self.sim_count += 1;
+        if self.sim_count < self.settings.detector_horizon {
+            return;
+        }
+        self.sim_valid = false;
+        let quiet = !self.excited && self.ring_len == self.settings.pe_window;
+        if quiet {
+            self.quiet_count += 1;
+        }
+        // Quiet comparisons come every `detector_horizon` samples: average over the last
+        // ≈ W samples' worth of them.
+        let memory = (self.settings.pe_window / self.settings.detector_horizon).max(1);
+        let alpha = 1.0 / (self.quiet_count.min(memory).max(1) as f64);
+        let mut z = 0.0;
+        for i in 0..n {
+            let e2 = (x[i] - self.sim_hist[i]).powi(2);
+            if quiet {
+                self.quiet_ms[i] += alpha * (e2 - self.quiet_ms[i]);
+                self.sigma[i] = self.sigma_fit[i].max(self.quiet_ms[i].sqrt());
+            }
+            z += e2 / (self.sigma[i] * self.sigma[i]);
+        }
+        z /= n as f64;
+        step.residual = z;
+        if self.excited {
+            self.cusum = (self.cusum + z - 1.0 - self.settings.cusum_drift).max(0.0);
+        }
+        if !self.fired && self.cusum > self.settings.cusum_threshold {
+            self.fired = true;
+            self.since_fire = 0;
+            step.fired = true;
+            self.discount(self.settings.change_discount);
+        }
     }
 
     /// Multiply the past information by `w` (0 < w ≤ 1; the factor by √w).
@@ -965,6 +1026,7 @@ mod tests {
             pe_input_std: 0.3,
             pe_min_eig: 1e-3,
             pe_window: 50,
+            detector_horizon: 1,
             cusum_drift: 2.0,
             cusum_threshold: 50.0,
             residual_floor: 1e-3,
