@@ -103,13 +103,13 @@ class Experiment:
                 raise ConfigError(f"{source}: controllers: unknown controller {c!r}")
         if exp.cases and exp.grid:
             raise ConfigError(f"{source}: cases: cannot be combined with grid")
-        for name, c in exp.cases.items():
-            if not isinstance(c, dict):
+        for name, spec in exp.cases.items():
+            if not isinstance(spec, dict):
                 raise ConfigError(f"{source}: cases.{name}: must be a table")
-            bad = sorted(set(c) - _CASE_KEYS)
+            bad = sorted(set(spec) - _CASE_KEYS)
             if bad:
                 raise ConfigError(f"{source}: cases.{name}: unknown key {bad[0]!r}")
-            if "mpc_oracle" in exp.controllers and "oracle" not in c:
+            if "mpc_oracle" in exp.controllers and "oracle" not in spec:
                 raise ConfigError(
                     f"{source}: cases.{name}.oracle: needed for mpc_oracle (the training "
                     "flight's overrides after the change)"
@@ -446,7 +446,7 @@ def adaptation_note(scenario: Scenario, events: list[tuple[float, str, float]]) 
     scenario's first payload event (``adopted … s after the change``)."""
     changes = scenario.to_dict().get("payload", {}).get("events", [])
     t_change = float(changes[0]["t"]) if changes else 0.0
-    first = {}
+    first: dict[str, float] = {}
     for t, what, _ in events:
         if t >= t_change:
             first.setdefault(what, t)

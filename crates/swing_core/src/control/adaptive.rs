@@ -204,7 +204,8 @@ impl Synthesizer {
         let model =
             model_from_factor(&job.factor, job.weight, rank, t).map_err(|e| e.to_string())?;
         let rho = model.spectral_radius().map_err(|e| e.to_string())?;
-        if !(rho <= self.settings.max_spectral_radius) {
+        // NaN is refused too.
+        if rho.is_nan() || rho > self.settings.max_spectral_radius {
             return Err(format!(
                 "spectral radius {rho:.4} above {}",
                 self.settings.max_spectral_radius

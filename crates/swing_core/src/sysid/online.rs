@@ -635,7 +635,7 @@ impl OnlineDmdc {
             let var = self.chol[a * d + a];
             // A channel without variance makes the correlation undefined: not excited.
             let scale = self.sum2[a * d + a] / w;
-            if !(var > 1e-14 * scale.max(1e-300)) {
+            if var.is_nan() || var <= 1e-14 * scale.max(1e-300) {
                 return false;
             }
             if a < self.m && var < min_std * min_std {
@@ -777,7 +777,7 @@ fn cholesky_in_place(a: &mut [f64], d: usize) -> bool {
         for k in 0..j {
             s -= a[j * d + k] * a[j * d + k];
         }
-        if !(s > 0.0) {
+        if s.is_nan() || s <= 0.0 {
             return false;
         }
         let l = s.sqrt();
