@@ -191,3 +191,62 @@ def test_an_oracle_controller_needs_its_case_overrides():
             },
             "x.toml",
         )
+
+
+def test_adaptive_mpc_object_steps_and_reports_events():
+    model = _core.pendulum_model(delays=4, axes=1)
+    ctrl = _core.AdaptiveMpc(model, None, {"synthesis": "deferred"})
+    assert ctrl.axes == 1 and ctrl.period == pytest.approx(model.dt)
+    ctrl.reset(np.zeros((1, 3)))
+    out = ctrl.step(np.zeros((1, 3)), [1.0])
+    assert out.shape == (1,) and np.isfinite(out).all()
+    assert ctrl.events() == [] and ctrl.swaps == 0
+    with pytest.raises(ConfigError):
+        _core.AdaptiveMpc(model, None, {"synthesis": "later"})
+
+
+@pytest.mark.realtime
+def test_fly_adapt_against_sitl(identified, tmp_path):
+    """``swingrt fly --adapt`` flies a short mission against ``swingrt sitl`` (real time,
+    separate processes) and hands back cleanly."""
+    import signal
+    import socket
+    import subprocess
+    import sys
+
+    from swingrt.io import load_flight
+
+    model = tmp_path / "model.json"
+    identified.save(model)
+    mission = tmp_path / "m.toml"
+    mission.write_text("duration = 6.0\n[[step]]\nt = 1.0\nvn = 1.0\n", encoding="utf-8")
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        url = f"udp:127.0.0.1:{s.getsockname()[1]}"
+    sitl = subprocess.Popen(
+        [sys.executable, "-m", "swingrt", "sitl", "--listen", url],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    log = tmp_path / "fly.parquet"
+    try:
+        res = subprocess.run(
+            [sys.executable, "-m", "swingrt", "fly", "--adapt", "--connect", url, "--model",
+             str(model), "--mission", str(mission), "--log", str(log)],
+            timeout=90,
+            capture_output=True,
+            text=True,
+        )  # fmt: skip
+    finally:
+        if sitl.poll() is None:
+            sitl.send_signal(signal.SIGINT)
+        try:
+            sitl.communicate(timeout=10)
+        except subprocess.TimeoutExpired:
+            sitl.kill()
+            sitl.communicate()
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "adaptive MPC adopted" in res.stdout
+    tr = load_flight(log, columns=["t", "vn"])
+    assert 0.7 < np.mean(tr["vn"][(tr["t"] > 4.5) & (tr["t"] < 6.0)]) < 1.3

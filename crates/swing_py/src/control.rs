@@ -16,7 +16,9 @@ use swing_core::control::lqr::{LqrController, LqrSettings};
 use swing_core::control::mpc::timing::tick_timing;
 use swing_core::control::mpc::{MpcController, MpcSettings};
 use swing_core::control::riccati;
-use swing_core::control::{AxisState, ControlError, SwingController, TickInfo, TickKind};
+use swing_core::control::{
+    AdaptiveMpc, AdaptiveSettings, AxisState, ControlError, SwingController, TickInfo, TickKind,
+};
 use swing_core::plant::PendulumModel;
 use swing_core::testing::pendulum_delay_model;
 
@@ -188,6 +190,85 @@ impl PyMpc {
     /// The settings in use, as a dict.
     fn settings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         convert::to_py_object(py, self.inner.settings())
+    }
+}
+
+/// The adaptive MPC (`control::adaptive`) on an identified model: the online DMDc follows
+/// the payload and a checked re-synthesis is swapped in between ticks. For flight the
+/// synthesis runs on a worker thread unless `adaptive` says `synthesis = "deferred"`.
+#[pyclass(name = "AdaptiveMpc", module = "swingrt._core", unsendable)]
+pub struct PyAdaptiveMpc {
+    inner: AdaptiveMpc,
+}
+
+#[pymethods]
+impl PyAdaptiveMpc {
+    /// Design the first MPC on `model` with MPC `settings` and `adaptive` settings.
+    #[new]
+    #[pyo3(signature = (model, settings=None, adaptive=None))]
+    fn new(
+        py: Python<'_>,
+        model: &PyLinearModel,
+        settings: Option<&Bound<'_, PyAny>>,
+        adaptive: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
+        let model = model.inner.clone();
+        let s: MpcSettings = convert::settings(settings, "settings")?;
+        let a: AdaptiveSettings = convert::settings(adaptive, "adaptive")?;
+        let inner = py
+            .detach(|| AdaptiveMpc::new(&model, s, a))
+            .map_err(to_py)?;
+        Ok(Self { inner })
+    }
+
+    /// One tick: state (axes × [v, swing, swing_rate]) and velocity reference in,
+    /// acceleration setpoint per axis [m/s²] out; runs deferred synthesis work after it.
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        state: PyReadonlyArrayDyn<'py, f64>,
+        vel_ref: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let (out, _) = step_any(&mut self.inner, &state, vel_ref)?;
+        self.inner.between_ticks();
+        Ok(PyArray1::from_vec(py, out))
+    }
+
+    /// Restart from a measured state and acceleration setpoint (bumpless transfer).
+    #[pyo3(signature = (state, acc=None))]
+    fn reset(
+        &mut self,
+        state: PyReadonlyArrayDyn<'_, f64>,
+        acc: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        reset_any(&mut self.inner, &state, acc)
+    }
+
+    /// Events so far as (tick, what, value): `detected`, `requested`, `adopted`, `rejected`.
+    fn events(&self) -> Vec<(u64, String, f64)> {
+        self.inner
+            .events()
+            .into_iter()
+            .map(|e| (e.tick, e.what.to_string(), e.value))
+            .collect()
+    }
+
+    /// Models adopted since the start.
+    #[getter]
+    fn swaps(&self) -> usize {
+        self.inner.swaps()
+    }
+
+    /// Tick period [s] (the model's dt).
+    #[getter]
+    fn period(&self) -> f64 {
+        self.inner.period()
+    }
+
+    /// Number of controlled axes.
+    #[getter]
+    fn axes(&self) -> usize {
+        self.inner.axes()
     }
 }
 
@@ -470,6 +551,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(dare, m)?)?;
     m.add_function(wrap_pyfunction!(mpc_tick_timing, m)?)?;
     m.add_function(wrap_pyfunction!(adaptive_timing, m)?)?;
+    m.add_class::<PyAdaptiveMpc>()?;
     m.add_function(wrap_pyfunction!(pendulum_model, m)?)?;
     m.add_function(wrap_pyfunction!(mpc_step_check, m)?)?;
     m.add_function(wrap_pyfunction!(step_overshoot, m)?)?;
