@@ -128,6 +128,47 @@ fn a_switched_plant_is_detected_and_its_model_adopted() {
     assert!(worst_v < 5.0, "loop left the envelope: |v| up to {worst_v}");
 }
 
+/// A plant that switches back right after a swap: the new model mispredicts at once, the
+/// detector fires within the revert window and the replaced controller takes over again.
+#[test]
+fn a_swap_that_mispredicts_at_once_is_reverted() {
+    let light = model(0.1, 0.5);
+    let heavy = model(0.3, 2.0);
+    let probing = AdaptiveSettings {
+        probe_amplitude: 0.2,
+        revert_window: 400,
+        ..settings()
+    };
+    let mut ctrl = AdaptiveMpc::new(&light, MpcSettings::default(), probing).unwrap();
+    let mut plant = LinearPlant::new(&heavy).unwrap();
+    ctrl.reset(&plant.state(), &[0.0]);
+    let mut u = [0.0];
+    let mut switched_back = false;
+    for k in 0..3000 {
+        if ctrl.swaps() == 1 && !switched_back {
+            plant = LinearPlant::new(&light).unwrap();
+            switched_back = true;
+        }
+        let st = plant.state();
+        ctrl.step(&st, &[reference(k)], &mut u).unwrap();
+        ctrl.between_ticks();
+        plant.step(&u);
+    }
+    let events = ctrl.events();
+    eprintln!("{events:?}");
+    assert!(switched_back, "no swap happened");
+    let whats: Vec<&str> = events.iter().map(|e| e.what).collect();
+    let adopted = whats.iter().position(|w| *w == "adopted").unwrap();
+    let reverted = whats.iter().position(|w| *w == "reverted");
+    assert!(reverted > Some(adopted), "{whats:?}");
+    assert_eq!(
+        ctrl.model().a,
+        light.a,
+        "the original controller flies again"
+    );
+    assert_eq!(ctrl.swaps(), 1, "adaptation stops after a revert");
+}
+
 /// Ten minutes of hover on the right model with sensor noise: the gate holds the estimate
 /// still, the detector stays quiet and the model never changes.
 #[test]

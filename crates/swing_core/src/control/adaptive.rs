@@ -27,6 +27,12 @@
 //! the refit's constant term has just absorbed the steady offsets of the recent data and
 //! keeping the old estimate would count them twice; without the affine column it is kept.
 //! Replaced controllers and models are dropped on the worker, not on the tick.
+//!
+//! Revert. The check flies a candidate on its own model, so it cannot catch a model that is
+//! wrong about the vehicle. The controller a swap replaced is kept; if the detector fires
+//! again within `revert_window` ticks of the swap (the new model mispredicts at once), the
+//! old controller, which has flown, takes over again; adaptation goes on with more data, and
+//! stops for the flight after [`MAX_REVERTS`] reverts.
 
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TryRecvError, TrySendError};
 use std::sync::Arc;
@@ -90,6 +96,10 @@ pub struct AdaptiveSettings {
     pub probe_amplitude: f64,
     /// Ticks each probing level is held [ticks].
     pub probe_hold: usize,
+    /// A detection within this many ticks of a swap reverts to the controller the swap
+    /// replaced, which has flown [ticks] (0 = never); after three reverts adaptation stops
+    /// for the flight.
+    pub revert_window: usize,
 }
 
 impl Default for AdaptiveSettings {
@@ -106,6 +116,7 @@ impl Default for AdaptiveSettings {
             synthesis: SynthesisMode::Deferred,
             probe_amplitude: 0.0,
             probe_hold: 5,
+            revert_window: 200,
         }
     }
 }
@@ -276,6 +287,10 @@ enum Synthesis {
     },
 }
 
+/// Reverts after which adaptation stops for the flight: a change the online model keeps
+/// failing to capture is left to the controller that has flown.
+pub const MAX_REVERTS: usize = 3;
+
 /// Most adaptation events kept (the log is preallocated; later events are counted only).
 pub const MAX_EVENTS: usize = 256;
 
@@ -297,6 +312,11 @@ pub struct AdaptiveMpc {
     retry_samples: u64,
     probe_amplitude: f64,
     probe_hold: u64,
+    previous: Option<(Box<MpcController>, Box<LinearModel>)>,
+    swapped_at: u64,
+    revert_window: u64,
+    suspended: bool,
+    reverts: usize,
     probe_state: u64,
     probe_level: f64,
     tick: u64,
@@ -400,6 +420,11 @@ impl AdaptiveMpc {
             retry_samples: settings.retry_samples as u64,
             probe_amplitude: settings.probe_amplitude,
             probe_hold: settings.probe_hold as u64,
+            previous: None,
+            swapped_at: 0,
+            revert_window: settings.revert_window as u64,
+            suspended: false,
+            reverts: 0,
             probe_state: 0x9e37_79b9_7f4a_7c15,
             probe_level: 0.0,
             tick: 0,
@@ -502,7 +527,13 @@ impl AdaptiveMpc {
                 self.online.adopt(&model)?;
                 let old_mpc = std::mem::replace(&mut self.active, mpc);
                 let old_model = std::mem::replace(&mut self.model, model);
-                self.discard(Retired::Controller(old_mpc, old_model));
+                // The replaced controller stays at hand for a revert; one held before it
+                // (flown, then replaced) goes.
+                if let Some((m, l)) = self.previous.take() {
+                    self.discard(Retired::Controller(m, l));
+                }
+                self.previous = Some((old_mpc, old_model));
+                self.swapped_at = self.tick;
                 self.swaps += 1;
                 let overshoot = outcome.check.map_or(f64::NAN, |c| c.overshoot);
                 self.log("adopted", overshoot);
@@ -530,9 +561,27 @@ impl AdaptiveMpc {
     }
 
     /// Hand the current factor to the synthesis when a rebuild is due.
+    /// Go back to the controller replaced by the last swap (see [`AdaptiveSettings`]'s
+    /// `revert_window`); after [`MAX_REVERTS`] reverts adaptation stops for the flight.
+    fn revert(&mut self) -> Result<(), ControlError> {
+        let Some((mut mpc, model)) = self.previous.take() else {
+            return Ok(());
+        };
+        mpc.take_over(&self.active, true)?;
+        self.online.adopt(&model)?;
+        let failed_mpc = std::mem::replace(&mut self.active, mpc);
+        let failed_model = std::mem::replace(&mut self.model, model);
+        self.discard(Retired::Controller(failed_mpc, failed_model));
+        self.reverts += 1;
+        self.suspended = self.reverts >= MAX_REVERTS;
+        self.log("reverted", (self.tick - self.swapped_at) as f64);
+        Ok(())
+    }
+
     fn maybe_request(&mut self) {
         let o = &self.online;
         let due = !self.busy
+            && !self.suspended
             && o.fired()
             && o.excited()
             && o.accepted_since_fire() >= self.min_new_samples
@@ -617,6 +666,10 @@ impl SwingController for AdaptiveMpc {
             let st = self.online.update(&self.x, &self.u_last[..self.m])?;
             if st.fired {
                 self.log("detected", st.statistic);
+                let recent = self.tick - self.swapped_at <= self.revert_window;
+                if self.previous.is_some() && recent {
+                    self.revert()?;
+                }
             }
         }
         self.poll()?;

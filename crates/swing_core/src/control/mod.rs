@@ -43,7 +43,7 @@ pub struct AxisState {
 pub struct ControllerEvent {
     /// Controller tick at which it happened (1 = the first tick after the reset).
     pub tick: u64,
-    /// What happened (`detected`, `requested`, `adopted`, `rejected`).
+    /// What happened (`detected`, `requested`, `adopted`, `rejected`, `reverted`).
     pub what: &'static str,
     /// An accompanying figure (the detector statistic, the effective sample count …; NaN
     /// when none).
