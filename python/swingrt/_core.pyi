@@ -9,6 +9,7 @@ import numpy.typing as npt
 
 __version__: str
 __all__ = [
+    "AdaptiveMpc",
     "FLIGHT_COLUMNS",
     "GRAVITY",
     "HilPlant",
@@ -22,6 +23,7 @@ __all__ = [
     "Simulator",
     "TRACE_COLUMNS",
     "__version__",
+    "adaptive_timing",
     "care",
     "check_settings",
     "dare",
@@ -117,6 +119,15 @@ class Simulator:
     def attach_lqr(
         self, params: Any, axes: int, settings: Any, engage_at: float, budget: float
     ) -> None: ...
+    def attach_adaptive_mpc(
+        self,
+        model: LinearModel,
+        settings: Any,
+        adaptive: Any,
+        engage_at: float,
+        budget: float,
+    ) -> None: ...
+    def controller_events(self) -> list[tuple[float, str, float]]: ...
     def controller_prediction(self) -> npt.NDArray[np.float64] | None: ...
 
 # --- system identification ---------------------------------------------------------------
@@ -171,6 +182,13 @@ class Search:
     def best(self) -> int: ...
 
 def check_settings(section: str, settings: Any = None) -> dict[str, Any]: ...
+def adaptive_timing(
+    model: LinearModel,
+    settings: Any = None,
+    adaptive: Any = None,
+    n_ticks: int = 2000,
+    repeats: int = 5,
+) -> dict[str, dict[str, float]]: ...
 def identify(
     x: npt.NDArray[np.float64],
     u: npt.NDArray[np.float64],
@@ -247,6 +265,19 @@ class Mpc:
     def disturbance(self) -> npt.NDArray[np.float64]: ...
     def last_tick(self) -> dict[str, Any]: ...
     def settings(self) -> dict[str, Any]: ...
+
+@final
+class AdaptiveMpc:
+    def __new__(cls, model: LinearModel, settings: Any = None, adaptive: Any = None) -> Self: ...
+    @property
+    def period(self) -> float: ...
+    @property
+    def axes(self) -> int: ...
+    @property
+    def swaps(self) -> int: ...
+    def step(self, state: npt.NDArray[np.float64], vel_ref: Any) -> npt.NDArray[np.float64]: ...
+    def reset(self, state: npt.NDArray[np.float64], acc: Any = None) -> None: ...
+    def events(self) -> list[tuple[int, str, float]]: ...
 
 @final
 class Lqr:

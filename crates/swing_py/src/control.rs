@@ -16,7 +16,9 @@ use swing_core::control::lqr::{LqrController, LqrSettings};
 use swing_core::control::mpc::timing::tick_timing;
 use swing_core::control::mpc::{MpcController, MpcSettings};
 use swing_core::control::riccati;
-use swing_core::control::{AxisState, ControlError, SwingController, TickInfo, TickKind};
+use swing_core::control::{
+    AdaptiveMpc, AdaptiveSettings, AxisState, ControlError, SwingController, TickInfo, TickKind,
+};
 use swing_core::plant::PendulumModel;
 use swing_core::testing::pendulum_delay_model;
 
@@ -191,6 +193,85 @@ impl PyMpc {
     }
 }
 
+/// The adaptive MPC (`control::adaptive`) on an identified model: the online DMDc follows
+/// the payload and a checked re-synthesis is swapped in between ticks. For flight the
+/// synthesis runs on a worker thread unless `adaptive` says `synthesis = "deferred"`.
+#[pyclass(name = "AdaptiveMpc", module = "swingrt._core", unsendable)]
+pub struct PyAdaptiveMpc {
+    inner: AdaptiveMpc,
+}
+
+#[pymethods]
+impl PyAdaptiveMpc {
+    /// Design the first MPC on `model` with MPC `settings` and `adaptive` settings.
+    #[new]
+    #[pyo3(signature = (model, settings=None, adaptive=None))]
+    fn new(
+        py: Python<'_>,
+        model: &PyLinearModel,
+        settings: Option<&Bound<'_, PyAny>>,
+        adaptive: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
+        let model = model.inner.clone();
+        let s: MpcSettings = convert::settings(settings, "settings")?;
+        let a: AdaptiveSettings = convert::settings(adaptive, "adaptive")?;
+        let inner = py
+            .detach(|| AdaptiveMpc::new(&model, s, a))
+            .map_err(to_py)?;
+        Ok(Self { inner })
+    }
+
+    /// One tick: state (axes × [v, swing, swing_rate]) and velocity reference in,
+    /// acceleration setpoint per axis [m/s²] out; runs deferred synthesis work after it.
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        state: PyReadonlyArrayDyn<'py, f64>,
+        vel_ref: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let (out, _) = step_any(&mut self.inner, &state, vel_ref)?;
+        self.inner.between_ticks();
+        Ok(PyArray1::from_vec(py, out))
+    }
+
+    /// Restart from a measured state and acceleration setpoint (bumpless transfer).
+    #[pyo3(signature = (state, acc=None))]
+    fn reset(
+        &mut self,
+        state: PyReadonlyArrayDyn<'_, f64>,
+        acc: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<()> {
+        reset_any(&mut self.inner, &state, acc)
+    }
+
+    /// Events so far as (tick, what, value): `detected`, `requested`, `adopted`, `rejected`.
+    fn events(&self) -> Vec<(u64, String, f64)> {
+        self.inner
+            .events()
+            .into_iter()
+            .map(|e| (e.tick, e.what.to_string(), e.value))
+            .collect()
+    }
+
+    /// Models adopted since the start.
+    #[getter]
+    fn swaps(&self) -> usize {
+        self.inner.swaps()
+    }
+
+    /// Tick period [s] (the model's dt).
+    #[getter]
+    fn period(&self) -> f64 {
+        self.inner.period()
+    }
+
+    /// Number of controlled axes.
+    #[getter]
+    fn axes(&self) -> usize {
+        self.inner.axes()
+    }
+}
+
 /// The baseline LQR (thesis 5.3) for the given payload parameters.
 #[pyclass(name = "Lqr", module = "swingrt._core", unsendable)]
 pub struct PyLqr {
@@ -352,6 +433,37 @@ fn mpc_tick_timing<'py>(
     Ok(d)
 }
 
+/// Timing of the adaptive MPC (`control::adaptive::adaptive_timing`): the tick with the
+/// online update over `n_ticks` ticks [µs] and the re-synthesis `repeats` times [ms].
+#[pyfunction]
+#[pyo3(signature = (model, settings=None, adaptive=None, n_ticks=2000, repeats=5))]
+fn adaptive_timing<'py>(
+    py: Python<'py>,
+    model: &PyLinearModel,
+    settings: Option<&Bound<'py, PyAny>>,
+    adaptive: Option<&Bound<'py, PyAny>>,
+    n_ticks: usize,
+    repeats: usize,
+) -> PyResult<Bound<'py, PyDict>> {
+    let model = model.inner.clone();
+    let s: MpcSettings = convert::settings(settings, "settings")?;
+    let a: swing_core::control::AdaptiveSettings = convert::settings(adaptive, "adaptive")?;
+    let (tick, build) = py
+        .detach(|| swing_core::control::adaptive::adaptive_timing(&model, &s, &a, n_ticks, repeats))
+        .map_err(to_py)?;
+    let d = PyDict::new(py);
+    for (key, t) in [("tick_us", tick), ("resynthesis_ms", build)] {
+        let e = PyDict::new(py);
+        e.set_item("median", t.median_us)?;
+        e.set_item("p99", t.p99_us)?;
+        e.set_item("max", t.max_us)?;
+        e.set_item("mean", t.mean_us)?;
+        e.set_item("count", t.ticks)?;
+        d.set_item(key, e)?;
+    }
+    Ok(d)
+}
+
 /// The white-box pendulum fitted in `delays` delay coordinates (seeded): a realistic
 /// stand-in for an identified model in benchmarks and tests.
 #[pyfunction]
@@ -438,6 +550,8 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(care, m)?)?;
     m.add_function(wrap_pyfunction!(dare, m)?)?;
     m.add_function(wrap_pyfunction!(mpc_tick_timing, m)?)?;
+    m.add_function(wrap_pyfunction!(adaptive_timing, m)?)?;
+    m.add_class::<PyAdaptiveMpc>()?;
     m.add_function(wrap_pyfunction!(pendulum_model, m)?)?;
     m.add_function(wrap_pyfunction!(mpc_step_check, m)?)?;
     m.add_function(wrap_pyfunction!(step_overshoot, m)?)?;

@@ -6,6 +6,7 @@ use pyo3::types::{PyDict, PyTuple};
 use swing_core::control::lqr::{LqrController, LqrSettings};
 use swing_core::control::mpc::{MpcController, MpcSettings};
 use swing_core::control::px4::AxisSetpoint;
+use swing_core::control::{AdaptiveMpc, AdaptiveSettings};
 use swing_core::plant::PendulumModel;
 use swing_core::sim::{Scenario, Simulator, Trace, FLIGHT_COLUMNS, STATE_KEYS, TRACE_COLUMNS};
 use swing_core::ConfigError;
@@ -288,6 +289,35 @@ impl PySimulator {
         self.inner
             .attach_controller(Box::new(mpc), engage_at, budget)
             .map_err(to_py)
+    }
+
+    /// Fly the adaptive MPC (`control::adaptive`) designed on `model` with MPC `settings`
+    /// and `adaptive` settings from `engage_at` [s]: the model follows the payload online.
+    #[pyo3(signature = (model, settings, adaptive, engage_at, budget))]
+    fn attach_adaptive_mpc(
+        &mut self,
+        model: &PyLinearModel,
+        settings: Option<&Bound<'_, PyAny>>,
+        adaptive: Option<&Bound<'_, PyAny>>,
+        engage_at: f64,
+        budget: f64,
+    ) -> PyResult<()> {
+        let settings: MpcSettings = crate::convert::settings(settings, "mpc")?;
+        let adaptive: AdaptiveSettings = crate::convert::settings(adaptive, "adaptive")?;
+        let ctrl = AdaptiveMpc::new(&model.inner, settings, adaptive).map_err(to_py)?;
+        self.inner
+            .attach_controller(Box::new(ctrl), engage_at, budget)
+            .map_err(to_py)
+    }
+
+    /// Events of the attached controller so far as (time [s], what, value) tuples, e.g. the
+    /// adaptive MPC's `detected`, `requested`, `adopted` and `rejected`.
+    fn controller_events(&self) -> Vec<(f64, String, f64)> {
+        self.inner
+            .controller_events()
+            .into_iter()
+            .map(|(t, w, v)| (t, w.to_string(), v))
+            .collect()
     }
 
     /// Fly the baseline LQR (eq. 5.12–5.20) with the white-box `params` (a dict of `m_q`,

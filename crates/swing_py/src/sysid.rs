@@ -377,9 +377,15 @@ fn check_settings<'py>(
             s.validate().map_err(within)?;
             to_py_object(py, &s)
         }
+        "adaptive" => {
+            let s: swing_core::control::AdaptiveSettings =
+                crate::convert::settings(settings, section)?;
+            s.validate().map_err(within)?;
+            to_py_object(py, &s)
+        }
         other => Err(raise(
             Category::Config,
-            format!("unknown settings section {other:?} (identify, mpc, lqr, selection)"),
+            format!("unknown settings section {other:?} (identify, mpc, lqr, selection, adaptive)"),
         )),
     }
 }

@@ -31,6 +31,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     )
     p.add_argument("--model", required=True, help="model JSON from `swingrt identify`")
     p.add_argument("--mission", help="mission TOML ([[step]] t, vn, ve; duration)")
+    p.add_argument(
+        "--adapt",
+        action="store_true",
+        help="fly the adaptive MPC: the model follows the payload in flight (online DMDc, "
+        "change detector, checked re-synthesis on a worker thread)",
+    )
     p.add_argument("--log", metavar="FILE", help="write the flight trace + loop timing")
     p.add_argument("--system-id", type=int, help="expected vehicle system id")
     p.add_argument(
@@ -73,7 +79,7 @@ def run(args) -> int:
         raise ConfigError(f"--system-id must be 1..255, not {args.system_id}")
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
     mission = Mission.from_toml(args.mission) if args.mission else Mission.default()
-    controller, ts, axes = load_controller(args.model)
+    controller, ts, axes = load_controller(args.model, adapt=args.adapt)
     watchdog = Watchdog(
         ts,
         stale_factor=args.stale_factor,
@@ -98,4 +104,7 @@ def run(args) -> int:
     finally:
         conn.close()
     print(f"fly: {report.summary()}")
+    if args.adapt:
+        adopted = sum(1 for _, what, _ in controller.events() if what == "adopted")
+        print(f"fly: adaptive MPC adopted {adopted} re-identified model(s)")
     return 0

@@ -1,9 +1,13 @@
 """The thesis's chapter-5 experiments: definitions and the runner (``swingrt experiment``).
 
 Each ``defs/*.toml`` defines: the controlled ``axes``; the ``controllers`` compared
-(``pid``, ``lqr``, ``mpc``); the velocity ``step``; the run ``duration``; scenario overrides
-``[common]`` (training and evaluation), ``[training]`` and ``[evaluation]``; and an optional
-``[grid]`` of dotted scenario keys whose product makes the cases. For every case the runner
+(``pid``, ``lqr``, ``mpc``, ``mpc_adaptive``, ``mpc_oracle``); the velocity ``step``; the run
+``duration``; scenario overrides ``[common]`` (training and evaluation), ``[training]`` and
+``[evaluation]``; settings ``[identify]``, ``[mpc]``, ``[lqr]`` and ``[adaptive]``; and
+either an optional ``[grid]`` of dotted scenario keys whose product makes the cases, or
+named ``[cases.<name>]`` tables with their own ``common``, ``evaluation`` and ``step`` and,
+for ``mpc_oracle``, ``oracle`` (the overrides of a second training flight, the configuration
+after an in-flight change, on which the oracle's model is identified). For every case the runner
 (:mod:`swingrt.experiments.runner`) flies the training flight under PX4 PID, identifies the
 DMDc model (search) for the MPC and the white-box parameters for the LQR, then flies the
 step with every controller (:func:`simulate_controller`) and writes the report

@@ -54,7 +54,15 @@ _KNOWN_KEYS = {
     "mpc",
     "lqr",
     "training_duration",
+    "adaptive",
+    "cases",
 }
+
+#: Controllers an experiment can compare.
+CONTROLLERS = ("pid", "lqr", "mpc", "mpc_adaptive", "mpc_oracle")
+
+#: Keys of one entry of an experiment's ``[cases.<name>]`` table.
+_CASE_KEYS = {"description", "common", "evaluation", "oracle", "step"}
 
 
 @dataclass
@@ -76,6 +84,8 @@ class Experiment:
     identify: dict[str, Any] = field(default_factory=dict)
     mpc: dict[str, Any] = field(default_factory=dict)
     lqr: dict[str, Any] = field(default_factory=dict)
+    adaptive: dict[str, Any] = field(default_factory=dict)
+    cases: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], source: str) -> Experiment:
@@ -89,8 +99,21 @@ class Experiment:
         if exp.axes not in ("n", "ne"):
             raise ConfigError(f"{source}: axes: must be 'n' or 'ne' (got {exp.axes!r})")
         for c in exp.controllers:
-            if c not in ("pid", "lqr", "mpc"):
+            if c not in CONTROLLERS:
                 raise ConfigError(f"{source}: controllers: unknown controller {c!r}")
+        if exp.cases and exp.grid:
+            raise ConfigError(f"{source}: cases: cannot be combined with grid")
+        for name, spec in exp.cases.items():
+            if not isinstance(spec, dict):
+                raise ConfigError(f"{source}: cases.{name}: must be a table")
+            bad = sorted(set(spec) - _CASE_KEYS)
+            if bad:
+                raise ConfigError(f"{source}: cases.{name}: unknown key {bad[0]!r}")
+            if "mpc_oracle" in exp.controllers and "oracle" not in spec:
+                raise ConfigError(
+                    f"{source}: cases.{name}.oracle: needed for mpc_oracle (the training "
+                    "flight's overrides after the change)"
+                )
         if not (isinstance(exp.duration, (int, float)) and exp.duration > exp.step.get("t", 0)):
             raise ConfigError(f"{source}: duration: must be longer than the step time")
         for k, v in exp.grid.items():
@@ -111,10 +134,13 @@ class Experiment:
             _core.check_settings("identify", ident)
             _core.check_settings("mpc", self.mpc)
             _core.check_settings("lqr", self.lqr)
+            _core.check_settings("adaptive", self.adaptive)
             for case, over in cases(self):
                 try:
                     train = training_scenario(self, over, 0)
-                    evaluation_scenario(self, over, 0, train)
+                    evaluation_scenario(self, over, 0, train, case=case)
+                    if "oracle" in self.cases.get(case, {}):
+                        oracle_training_scenario(self, case, over, 0)
                 except ConfigError as exc:
                     raise ConfigError(f"case {case}: {exc}", field=exc.field) from None
         except ConfigError as exc:
@@ -151,7 +177,10 @@ def _set_dotted(d: dict[str, Any], key: str, value: Any) -> None:
 
 
 def cases(exp: Experiment) -> list[tuple[str, dict[str, Any]]]:
-    """(case name, scenario overrides) for every point of the grid (one case without grid)."""
+    """(case name, scenario overrides) for every point of the grid, or every entry of
+    ``[cases]`` (its ``common`` overrides); one case without either."""
+    if exp.cases:
+        return [(name, dict(c.get("common", {}))) for name, c in exp.cases.items()]
     if not exp.grid:
         return [(exp.name, {})]
     keys = list(exp.grid)
@@ -185,16 +214,38 @@ def training_scenario(exp: Experiment, over: dict[str, Any], seed: int) -> Scena
     )
 
 
+def case_step(exp: Experiment, case: str | None) -> dict[str, float]:
+    """The step the metrics of ``case`` count from (the case's own ``step``, else the
+    experiment's)."""
+    return dict(exp.cases.get(case or "", {}).get("step", exp.step))
+
+
+def oracle_training_scenario(
+    exp: Experiment, case: str, over: dict[str, Any], seed: int
+) -> Scenario:
+    """The training flight of ``mpc_oracle``: the case's flight with its ``oracle``
+    overrides (the configuration after the change) on top."""
+    return training_scenario(exp, over, seed).with_overrides(exp.cases[case]["oracle"])
+
+
 def evaluation_scenario(
-    exp: Experiment, over: dict[str, Any], seed: int, training: Scenario
+    exp: Experiment,
+    over: dict[str, Any],
+    seed: int,
+    training: Scenario,
+    *,
+    case: str | None = None,
 ) -> Scenario:
     """The step flight of a case; PX4 keeps the training flight's hover thrust if the
-    evaluation changes the vehicle (nobody is told)."""
+    evaluation changes the vehicle (nobody is told). A ``[cases]`` entry's ``step`` and
+    ``evaluation`` overrides apply on top of the experiment's."""
     sc = Scenario.builtin("step").with_overrides(exp.common).with_overrides(over)
     sc = sc.with_overrides(
-        {"setpoints": _step_setpoints(exp.step), "duration": float(exp.duration)}
+        {"setpoints": _step_setpoints(case_step(exp, case)), "duration": float(exp.duration)}
     )
     ev = copy.deepcopy(exp.evaluation)
+    for k, v in exp.cases.get(case or "", {}).get("evaluation", {}).items():
+        ev[k] = copy.deepcopy(v)
     if "vehicle" in ev and "hover_thrust" not in ev.get("controller", {}):
         ev.setdefault("controller", {})["hover_thrust"] = training.hover_thrust()
     return sc.with_overrides(ev).with_overrides({"seed": seed})
@@ -219,24 +270,32 @@ def simulate_controller(
     lqr_params: dict[str, float] | None = None,
     mpc_settings: dict[str, Any] | None = None,
     lqr_settings: dict[str, Any] | None = None,
+    adaptive_settings: dict[str, Any] | None = None,
     engage_at: float = 0.0,
     prediction_at: float | None = None,
 ) -> tuple[Trace, dict[str, Any]]:
-    """Fly one scenario with ``pid``, ``lqr`` or ``mpc`` on the given axes.
+    """Fly one scenario with a controller of :data:`CONTROLLERS` on the given axes
+    (``mpc_oracle`` is the MPC on whatever ``model`` it is given).
 
-    Returns the trace and extras: fallback reason, tick timings, and (``prediction_at``)
-    the MPC's predicted outputs from the first tick at or after that time.
+    Returns the trace and extras: fallback reason, tick timings, the controller's events
+    (time [s], what, value) and (``prediction_at``) the MPC's predicted outputs from the
+    first tick at or after that time.
     """
     from swingrt import _core
 
     sim = _core.Simulator(scenario)
     n_axes = len(axes)
     extras: dict[str, Any] = {}
-    if controller == "mpc":
+    if controller in ("mpc", "mpc_oracle", "mpc_adaptive"):
         if model is None:
-            raise ConfigError("mpc needs an identified model", field="model")
+            raise ConfigError(f"{controller} needs an identified model", field="model")
         # The budget of one tick is its period.
-        sim.attach_mpc(model, mpc_settings or None, engage_at, model.dt)
+        if controller == "mpc_adaptive":
+            sim.attach_adaptive_mpc(
+                model, mpc_settings or None, adaptive_settings or None, engage_at, model.dt
+            )
+        else:
+            sim.attach_mpc(model, mpc_settings or None, engage_at, model.dt)
     elif controller == "lqr":
         if lqr_params is None:
             raise ConfigError("lqr needs the white-box parameters", field="lqr_params")
@@ -245,7 +304,7 @@ def simulate_controller(
         sim.attach_lqr(lqr_params, n_axes, lqr, engage_at, lqr["period"])
     elif controller != "pid":
         raise ConfigError(f"unknown controller {controller!r}", field="controller")
-    if prediction_at is not None and model is not None and controller == "mpc":
+    if prediction_at is not None and model is not None and controller.startswith("mpc"):
         sim.advance(prediction_at)
         sim.advance(model.dt)
         pred = sim.controller_prediction()
@@ -254,6 +313,7 @@ def simulate_controller(
     sim.run_to_end()
     trace = Trace(sim.take_trace(), {"scenario": scenario.to_dict(), "controller": controller})
     extras["fallback"] = sim.fallback_reason
+    extras["events"] = sim.controller_events()
     ticks = np.asarray(sim.tick_times())
     if len(ticks):
         extras["tick_us_median"] = float(np.median(ticks))
@@ -312,7 +372,14 @@ def run_experiment(
         train.to_parquet(out / f"{case}__training.parquet")
         model.save(out / f"{case}__model.json")
         wb.save(out / f"{case}__whitebox.json")
-        ev_sc = evaluation_scenario(exp, over, seed + 1, train_sc)
+        ev_sc = evaluation_scenario(exp, over, seed + 1, train_sc, case=case)
+        step = case_step(exp, case)
+        oracle = None
+        if "mpc_oracle" in exp.controllers:
+            log(f"{exp.name} [{i}/{len(all_cases)}] {case}: oracle training flight")
+            oracle_train = _run(oracle_training_scenario(exp, case, over, seed), False, "collect")
+            oracle, _, _ = identify_case(oracle_train, exp)
+            oracle.save(out / f"{case}__oracle_model.json")
         traces: dict[str, Trace] = {}
         prediction = None
         for ctrl in exp.controllers:
@@ -321,23 +388,26 @@ def run_experiment(
                 ev_sc,
                 ctrl,
                 axes=exp.axes,
-                model=model,
+                model=oracle if ctrl == "mpc_oracle" else model,
                 lqr_params=lqr,
                 mpc_settings=exp.mpc or None,
                 lqr_settings=exp.lqr or None,
-                prediction_at=exp.step["t"] if exp.prediction_figure else None,
+                adaptive_settings=exp.adaptive or None,
+                prediction_at=step["t"] if exp.prediction_figure else None,
             )
+            if ctrl == "mpc_adaptive":
+                notes.append(f"{case}: {adaptation_note(ev_sc, extras['events'])}")
             trace.to_parquet(out / f"{case}__{ctrl}.parquet")
             traces[ctrl] = trace
             axis = "ne" if exp.axes == "ne" else "n"
-            m = step_metrics(trace, t0=exp.step["t"], axis=axis)
+            m = step_metrics(trace, t0=step["t"], axis=axis)
             rows.append({"scenario": case, "controller": ctrl, **m})
             if extras.get("fallback"):
                 notes.append(f"{case} {ctrl}: fell back to PX4 PID ({extras['fallback']})")
             if "prediction" in extras:
                 prediction = extras["prediction"]
         floors = {
-            c: swing_iae_floor(tr, t0=exp.step["t"], axis="ne" if exp.axes == "ne" else "n")
+            c: swing_iae_floor(tr, t0=step["t"], axis="ne" if exp.axes == "ne" else "n")
             for c, tr in traces.items()
         }
         notes.append(
@@ -369,6 +439,30 @@ def run_experiment(
     write_metrics(out, exp, rows, notes)
     log(f"{exp.name}: wrote {out}")
     return rows
+
+
+def adaptation_note(scenario: Scenario, events: list[tuple[float, str, float]]) -> str:
+    """When the adaptive MPC detected the change and re-adopted a model, relative to the
+    scenario's first payload event (``adopted … s after the change``)."""
+    changes = scenario.to_dict().get("payload", {}).get("events", [])
+    t_change = float(changes[0]["t"]) if changes else 0.0
+    first: dict[str, float] = {}
+    for t, what, _ in events:
+        if t >= t_change:
+            first.setdefault(what, t)
+    rejected = sum(1 for t, w, _ in events if w == "rejected" and t >= t_change)
+    parts = [f"adaptive MPC, change at {t_change:.2f} s:"]
+    if "detected" in first:
+        parts.append(f"detected after {first['detected'] - t_change:.2f} s")
+    else:
+        parts.append("not detected")
+    if "adopted" in first:
+        parts.append(f"model re-adopted after {first['adopted'] - t_change:.2f} s")
+    else:
+        parts.append("no model re-adopted")
+    if rejected:
+        parts.append(f"{rejected} candidate(s) rejected by the check")
+    return " ".join(parts)
 
 
 #: Metrics :func:`compare_mpc_lqr` reads (lower is better for each).

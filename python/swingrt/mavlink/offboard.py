@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from swingrt._core import Mpc
+from swingrt._core import AdaptiveMpc, Mpc
 from swingrt.errors import (
     ConfigError,
     ControlError,
@@ -674,8 +674,10 @@ class OffboardSession:
 # ----------------------------------------------------------------------------- controllers
 
 
-def load_controller(model_path, settings=None):
-    """Build the MPC (``swingrt._core.Mpc``) from a model file; returns (ctrl, ts, axes)."""
+def load_controller(model_path, settings=None, *, adapt: bool = False, adaptive=None):
+    """Build the MPC (``swingrt._core.Mpc``) from a model file, or with ``adapt`` the
+    adaptive MPC (``swingrt._core.AdaptiveMpc``, re-synthesis on a worker thread unless
+    ``adaptive`` says otherwise); returns (ctrl, ts, axes)."""
     from swingrt.sysid import LinearModel
 
     p = Path(model_path)
@@ -683,6 +685,9 @@ def load_controller(model_path, settings=None):
     axes = len(model.inputs)
     if axes not in (1, 2):
         raise ModelError(f"{p}: model has {axes} inputs; fly supports 1 (North) or 2 (N, E)")
+    if adapt:
+        opts = {"synthesis": "thread", **(adaptive or {})}
+        return AdaptiveMpc(model, settings, opts), model.dt, axes
     return Mpc(model, settings), model.dt, axes
 
 

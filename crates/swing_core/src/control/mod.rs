@@ -10,6 +10,7 @@ use thiserror::Error;
 
 use crate::error::{Categorized, Category};
 
+pub mod adaptive;
 pub mod check;
 pub mod layout;
 pub mod lqr;
@@ -18,6 +19,7 @@ pub mod plant;
 pub mod riccati;
 pub mod selection;
 
+pub use adaptive::{AdaptiveMpc, AdaptiveSettings, SynthesisMode};
 pub use check::{mpc_step_check, step_check_with, StepCheck, StepCheckSettings};
 pub use layout::{AxisColumns, AxisLayout, Measured};
 pub use lqr::{LqrController, LqrSettings};
@@ -34,6 +36,18 @@ pub struct AxisState {
     pub swing: f64,
     /// Swing angle rate [rad/s].
     pub swing_rate: f64,
+}
+
+/// Something a controller did that a flight log should show (e.g. a model re-adopted).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ControllerEvent {
+    /// Controller tick at which it happened (1 = the first tick after the reset).
+    pub tick: u64,
+    /// What happened (`detected`, `requested`, `adopted`, `rejected`, `reverted`).
+    pub what: &'static str,
+    /// An accompanying figure (the detector statistic, the effective sample count …; NaN
+    /// when none).
+    pub value: f64,
 }
 
 /// How a controller tick produced its output.
@@ -148,5 +162,13 @@ pub trait SwingController: Send {
     /// swing]); `None` for controllers that do not predict. Not for the real-time path.
     fn prediction(&mut self) -> Option<Vec<f64>> {
         None
+    }
+    /// Work that may run between ticks, off the timed tick path (e.g. a deferred model
+    /// re-synthesis in simulation). Runners call it after each tick; the default does nothing.
+    fn between_ticks(&mut self) {}
+    /// Events so far (see [`ControllerEvent`]); empty for controllers without any. Not for
+    /// the real-time path.
+    fn events(&self) -> Vec<ControllerEvent> {
+        Vec::new()
     }
 }

@@ -246,6 +246,28 @@ impl Model {
         }
     }
 
+    /// Replace the payload parameters (kind, mass, length …) in flight; the state's links
+    /// are the caller's to set (see [`super::events`]).
+    pub fn set_payload(&mut self, payload: PayloadParams) {
+        self.links = payload.links();
+        self.masses[1] = payload.mass;
+        self.masses[2] = payload.mass2;
+        self.lengths = [payload.length, payload.length2];
+        self.payload = payload;
+    }
+
+    /// Set the (first) cable length [m] in flight.
+    pub fn set_length(&mut self, length: f64) {
+        self.payload.length = length;
+        self.lengths[0] = length;
+    }
+
+    /// Set the vehicle mass [kg] in flight.
+    pub fn set_vehicle_mass(&mut self, mass: f64) {
+        self.vehicle.mass = mass;
+        self.masses[0] = mass;
+    }
+
     /// Number of payload links.
     pub fn links(&self) -> usize {
         self.links

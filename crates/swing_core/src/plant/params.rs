@@ -161,6 +161,10 @@ pub struct PayloadParams {
     pub initial_swing_n: f64,
     /// Initial cable angle in the East–Down plane [rad].
     pub initial_swing_e: f64,
+    /// Events in flight (`[[payload.events]]`: attach, detach, mass, winch, vehicle_mass),
+    /// in time order; see [`super::events`] for fields, units and physics.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub events: Vec<super::events::PayloadEvent>,
 }
 
 impl Default for PayloadParams {
@@ -175,6 +179,7 @@ impl Default for PayloadParams {
             friction: 0.001,
             initial_swing_n: 0.0,
             initial_swing_e: 0.0,
+            events: Vec::new(),
         }
     }
 }

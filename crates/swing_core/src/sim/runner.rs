@@ -190,6 +190,12 @@ impl Simulator {
         self.supervisor.prediction()
     }
 
+    /// Events of the attached controller so far as (time [s], what, value), e.g. an
+    /// adaptive MPC's detections and model swaps.
+    pub fn controller_events(&self) -> Vec<(f64, &'static str, f64)> {
+        self.supervisor.events()
+    }
+
     /// Switch idealised effects (drag, friction, rotors) for experiments.
     pub fn set_effects(&mut self, fx: Effects) {
         self.fx = fx;
@@ -357,6 +363,9 @@ impl Simulator {
             self.check_finite()?;
         }
         let t = self.time();
+        if !self.model.payload.events.is_empty() {
+            crate::plant::apply_payload_events(&mut self.model, &mut self.state, t, self.h);
+        }
         self.wind.advance(self.h);
         self.wind_now = self.wind.at(t);
         let u = StepInput {
@@ -419,7 +428,7 @@ impl Simulator {
         let truth = self.true_swing();
         let meas = self.measured_swing();
         let payload = if self.model.links() > 0 {
-            s.payload_position(&self.sc.payload, 0)
+            s.payload_position(&self.model.payload, 0)
         } else {
             s.pos
         };

@@ -438,6 +438,19 @@ impl Scenario {
         crate::config::all_finite("start", &self.start)?;
         self.vehicle.validate().map_err(|e| e.within("vehicle"))?;
         self.payload.validate().map_err(|e| e.within("payload"))?;
+        let heaviest = crate::plant::check_events(&self.payload, self.vehicle.mass)
+            .map_err(|e| e.within("payload"))?;
+        let needed = crate::control::px4::Px4Cascade::hover_thrust_for(&self.vehicle, heaviest);
+        if needed > self.controller.thrust_max * 0.9 {
+            return Err(ConfigError::new(
+                "payload.events",
+                format!(
+                    "the events reach {heaviest:.3} kg, which needs {:.0} % thrust to hover; \
+                     too heavy",
+                    needed * 100.0
+                ),
+            ));
+        }
         self.wind.validate().map_err(|e| e.within("wind"))?;
         self.noise.validate().map_err(|e| e.within("noise"))?;
         self.controller

@@ -24,6 +24,8 @@ struct Attached {
     acc: [f64; 2],
     /// Velocity reference of the last tick per axis [m/s].
     vel_ref: [f64; 2],
+    /// Time of the reset tick [s] (the controller counts ticks from it).
+    t_start: f64,
 }
 
 /// What a controller tick reads from the simulation.
@@ -87,6 +89,7 @@ impl ControllerSupervisor {
             started: false,
             acc: [0.0; 2],
             vel_ref: [0.0; 2],
+            t_start: 0.0,
         });
         Ok(())
     }
@@ -125,6 +128,22 @@ impl ControllerSupervisor {
     /// Predicted outputs of the controller's last tick, if it predicts.
     pub(crate) fn prediction(&mut self) -> Option<Vec<f64>> {
         self.attached.as_mut().and_then(|a| a.ctrl.prediction())
+    }
+
+    /// The attached controller's events as (time [s], what, value); ticks are counted from
+    /// the reset tick, which is also the first step.
+    pub(crate) fn events(&self) -> Vec<(f64, &'static str, f64)> {
+        match &self.attached {
+            Some(a) if a.started => {
+                let period = a.ctrl.period();
+                a.ctrl
+                    .events()
+                    .iter()
+                    .map(|e| (a.t_start + (e.tick as f64 - 1.0) * period, e.what, e.value))
+                    .collect()
+            }
+            _ => Vec::new(),
+        }
     }
 
     /// Replace the controlled axes' setpoints by the controller's acceleration while active.
@@ -178,6 +197,7 @@ impl ControllerSupervisor {
             a.ctrl.reset(&states[..axes], &acc[..axes]);
             a.acc = acc;
             a.started = true;
+            a.t_start = t;
         }
         let mut out = [0.0; 2];
         let t0 = Instant::now();
@@ -186,6 +206,7 @@ impl ControllerSupervisor {
             .step(&states[..axes], &vel_ref[..axes], &mut out[..axes]);
         let elapsed = t0.elapsed().as_secs_f64();
         self.stats.tick_us.push(elapsed * 1e6);
+        a.ctrl.between_ticks();
         let reason = match &res {
             Err(e) => Some(format!("controller error: {e}")),
             Ok(_) if elapsed > a.budget => Some(format!(

@@ -130,6 +130,28 @@ impl DmdcBasis {
         })
     }
 
+    /// A basis from a triangular factor R (C × C, RᵀR the Gram of the feature columns in the
+    /// order of `hankel::feature_matrix`) computed elsewhere, e.g. the online estimator's.
+    pub(crate) fn from_factor(
+        r: Mat<f64>,
+        n: usize,
+        m: usize,
+        q_max: usize,
+        affine: bool,
+        input_mean: Vec<f64>,
+        samples: usize,
+    ) -> Self {
+        Self {
+            n,
+            m,
+            q_max,
+            affine,
+            input_mean,
+            r,
+            samples,
+        }
+    }
+
     /// Largest q this basis serves.
     pub fn q_max(&self) -> usize {
         self.q_max

@@ -411,6 +411,62 @@ impl MpcController {
         self.pred.as_slice()
     }
 
+    /// Continue from `prev` (same states, delays and axes) without a bump: take over its
+    /// measured delay stack, last input and state estimate; the disturbance estimate is taken
+    /// over only with `keep_disturbance` (else it restarts at zero). Allocates nothing; for
+    /// swapping in a controller re-synthesised on a new model between two ticks.
+    pub fn take_over(
+        &mut self,
+        prev: &MpcController,
+        keep_disturbance: bool,
+    ) -> Result<(), ControlError> {
+        if prev.n != self.n
+            || prev.nz != self.nz
+            || prev.m != self.m
+            || prev.y.len() != self.y.len()
+        {
+            return Err(ControlError::Model(format!(
+                "cannot take over from a controller with {} states × {} delays and {} axes \
+                 (this one has {} × {} and {})",
+                prev.n,
+                prev.nz / prev.n,
+                prev.m,
+                self.n,
+                self.nz / self.n,
+                self.m
+            )));
+        }
+        if !prev.initialized {
+            self.initialized = false;
+            return Ok(());
+        }
+        self.y.copy_from(&prev.y);
+        self.u_prev.copy_from(&prev.u_prev);
+        let nm = self.aug.nm;
+        let prev_est = prev.kf.estimate();
+        self.xi_last.fill(0.0);
+        self.xi_last
+            .rows_mut(0, nm)
+            .copy_from(&prev_est.rows(0, nm));
+        if keep_disturbance && prev.aug.nd == self.aug.nd {
+            let nd = self.aug.nd;
+            self.xi_last
+                .rows_mut(nm, nd)
+                .copy_from(&prev_est.rows(prev.aug.nm, nd));
+        }
+        // The previous controller's last posterior, propagated by the new model: the prior
+        // the next tick corrects.
+        self.kf.set_prior(self.xi_last.as_slice());
+        self.kf.predict(&self.u_prev);
+        for j in 0..self.cond.nc {
+            for a in 0..self.m {
+                self.u_sol[j * self.m + a] = self.u_prev[a];
+            }
+        }
+        self.initialized = true;
+        Ok(())
+    }
+
     /// Write the newest measured frame into the delay stack (shifting older frames down).
     fn push_frame(&mut self, state: &[AxisState]) {
         let (n, nz) = (self.n, self.nz);
