@@ -233,6 +233,7 @@ impl HilPlant {
             sc.vehicle.clone(),
             PayloadParams {
                 kind: PayloadKind::None,
+                events: Vec::new(),
                 ..sc.payload.clone()
             },
         );
@@ -357,6 +358,9 @@ impl HilPlant {
             wind: self.wind_now,
             external_force: Vector3::zeros(),
         };
+        if !self.airborne_model.payload.events.is_empty() {
+            self.payload_events();
+        }
         let mut next = self
             .model()
             .rk4(&self.state, &u, self.h, Effects::default());
@@ -381,9 +385,40 @@ impl HilPlant {
         s.att = *UnitQuaternion::from_euler_angles(0.0, 0.0, yaw).quaternion();
     }
 
+    /// The scenario's payload events (attach, detach, mass, winch, vehicle mass) on the
+    /// plant's clock. An attach lifts the payload from below the vehicle if it is high
+    /// enough, else the payload waits on the ground for the pick-up; on the ground the vehicle
+    /// carries what the events say it carries.
+    fn payload_events(&mut self) {
+        let (before, t) = (self.airborne_model.links(), self.time());
+        let mut state = self.state;
+        if !crate::plant::apply_payload_events(&mut self.airborne_model, &mut state, t, self.h) {
+            return;
+        }
+        let p = &self.airborne_model.payload;
+        let reach = p.length + if p.links() == 2 { p.length2 } else { 0.0 };
+        if p.links() == 0 {
+            self.payload_lifted = false;
+        } else if before == 0 {
+            // An attach picks up only what hangs free: on or near the ground it waits.
+            self.payload_lifted = -self.state.pos.z > reach;
+        }
+        if self.payload_lifted || p.links() == 0 {
+            self.state = state;
+        }
+        self.ground_model = Model::new(
+            self.airborne_model.vehicle.clone(),
+            PayloadParams {
+                kind: PayloadKind::None,
+                events: Vec::new(),
+                ..self.airborne_model.payload.clone()
+            },
+        );
+    }
+
     /// Pick the payload up once the cables are taut; set it down when it touches the ground.
     fn payload_contact(&mut self) {
-        let p = &self.sc.payload;
+        let p = &self.airborne_model.payload;
         if p.links() == 0 {
             return;
         }
@@ -392,7 +427,7 @@ impl HilPlant {
             let reach = p.length + if p.links() == 2 { p.length2 } else { 0.0 };
             if height > reach {
                 let s = &mut self.state;
-                let m = self.sc.vehicle.mass;
+                let m = self.airborne_model.vehicle.mass;
                 // Inelastic: the taut cable gives the payload the vehicle's velocity and
                 // the pair keeps its vertical momentum.
                 s.vel *= m / (m + p.total_mass());
@@ -434,7 +469,7 @@ impl HilPlant {
 
     /// The swing sensor's reading (N, E) [rad]: truth plus the scenario's sensor noise.
     pub fn measured_swing(&self) -> [f64; 2] {
-        if self.sc.payload.links() == 0 {
+        if self.airborne_model.links() == 0 {
             return [0.0; 2];
         }
         let t = self.true_swing();
@@ -528,7 +563,7 @@ impl HilPlant {
         let truth = self.true_swing();
         let meas = self.measured_swing();
         let payload = if self.payload_lifted {
-            s.payload_position(&self.sc.payload, 0)
+            s.payload_position(&self.airborne_model.payload, 0)
         } else {
             s.pos
         };
@@ -714,6 +749,51 @@ mod tests {
         assert_eq!(f.vel_ned, [0, -200, 50]);
         assert_eq!(f.vel, 200);
         assert_eq!(f.cog, 27000);
+    }
+
+    #[test]
+    fn payload_events_attach_in_the_air_and_detach() {
+        use crate::plant::events::{PayloadAction, PayloadEvent};
+        let mut sc = Scenario::builtin("hover").unwrap();
+        sc.payload.kind = PayloadKind::None;
+        let ev = |t: f64, action| PayloadEvent {
+            t,
+            action,
+            mass: None,
+            length: None,
+            rate: None,
+        };
+        sc.payload.events = vec![
+            PayloadEvent {
+                mass: Some(0.3),
+                length: Some(1.5),
+                ..ev(0.1, PayloadAction::Attach)
+            },
+            ev(0.2, PayloadAction::Detach),
+        ];
+        let mut p = HilPlant::new(sc, HilSettings::default()).unwrap();
+        let m = p.scenario().vehicle.mass;
+        let cmd = p.scenario().vehicle.command_for_thrust(m * GRAVITY / 4.0);
+        p.state.pos.z = -10.0;
+        p.state.vel.z = -0.5;
+        p.state.thrust = Vector4::repeat(m * GRAVITY / 4.0);
+        p.step([cmd; 4]).unwrap(); // 4 ms, before the attach
+        assert!(!p.payload_lifted());
+        while p.time() < 0.104 {
+            p.step([cmd; 4]).unwrap();
+        }
+        assert!(
+            p.payload_lifted(),
+            "attached in the air, 10 m up on a 1.5 m cable"
+        );
+        assert!((p.airborne_model.payload.mass - 0.3).abs() < 1e-12);
+        let f = p.sensors();
+        assert_eq!(f.swing, [0.0, 0.0]); // picked up hanging straight down
+        while p.time() < 0.204 {
+            p.step([cmd; 4]).unwrap();
+        }
+        assert!(!p.payload_lifted());
+        assert_eq!(p.model().links(), 0);
     }
 
     #[test]
