@@ -279,6 +279,14 @@ def test_watchdog_rules():
     assert wd.check_compute(0.001) is None
     assert wd.check_compute(0.02) is None and wd.check_compute(0.02) is None
     assert "solver overrun: 3 ticks" in wd.check_compute(0.02)
+    # swing envelope: off by default, and with a limit either axis trips it
+    tel.t_pos = tel.t_swing = tel.t_heartbeat = 200.0
+    tel.swing = [0.0, -math.radians(40.0)]
+    assert wd.check_inputs(tel, 200.0) is None
+    wd = Watchdog(ts=0.03, swing_limit=math.radians(30.0))
+    assert "swing 40.0° beyond the limit of 30°" in wd.check_inputs(tel, 200.0)
+    tel.swing = [math.radians(29.0), 0.0]
+    assert wd.check_inputs(tel, 200.0) is None
 
 
 def test_mission_file(tmp_path):

@@ -57,6 +57,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     p.add_argument(
         "--timeout", type=float, default=5.0, help="heartbeat/telemetry wait, s (default 5)"
     )
+    p.add_argument(
+        "--swing-limit",
+        type=float,
+        default=30.0,
+        metavar="DEG",
+        help="hand back to PX4 when the swing exceeds this angle (default 30°)",
+    )
     return p
 
 
@@ -75,6 +82,8 @@ def run(args) -> int:
         raise ConfigError(f"--stale-factor must be a number >= 1, not {args.stale_factor}")
     if not (0 < args.timeout < math.inf):
         raise ConfigError(f"--timeout must be a positive number of seconds, not {args.timeout}")
+    if not (0 < args.swing_limit < 90):
+        raise ConfigError(f"--swing-limit must be in (0, 90) degrees, not {args.swing_limit}")
     if args.system_id is not None and not (1 <= args.system_id <= 255):
         raise ConfigError(f"--system-id must be 1..255, not {args.system_id}")
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
@@ -84,6 +93,7 @@ def run(args) -> int:
         ts,
         stale_factor=args.stale_factor,
         budget=args.budget * 1e-3 if args.budget is not None else None,
+        swing_limit=math.radians(args.swing_limit),
     )
     conn = connect(args.connect)
     try:

@@ -16,6 +16,7 @@ As ``swingrt run`` on the built-in simulator, with PX4 in the loop of every flig
 
 from __future__ import annotations
 
+import math
 import shutil
 import sys
 import time
@@ -142,7 +143,7 @@ def run_on_px4(
                 mission=mission,
                 acc_limit=5.0,
                 log_path=path,
-                watchdog=Watchdog(ts),
+                watchdog=Watchdog(ts, swing_limit=math.radians(30.0)),
             )
         finally:
             conn.close()

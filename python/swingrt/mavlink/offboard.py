@@ -298,6 +298,10 @@ class Watchdog:
     budget: float | None = None
     overrun_ticks: int = 3
     link_timeout: float = 3.0
+    #: Largest swing angle [rad] the controller may leave the payload in before PX4 takes
+    #: back over (None: no limit). A model that no longer fits the payload (a winch, a
+    #: pick-up) can drive a growing swing that no other watchdog sees.
+    swing_limit: float | None = None
     _overruns: int = 0
 
     def check_inputs(self, tel: Telemetry, now: float) -> str | None:
@@ -314,6 +318,13 @@ class Watchdog:
                 return f"stale telemetry: {name} is {age:.0f} ms old (limit {lim:.0f} ms{dropped})"
         if now - tel.t_heartbeat > self.link_timeout:
             return f"dead link: no heartbeat for {now - tel.t_heartbeat:.1f} s"
+        if self.swing_limit is not None:
+            swing = max(abs(tel.swing[0]), abs(tel.swing[1]))
+            if swing > self.swing_limit:
+                return (
+                    f"swing {math.degrees(swing):.1f}° beyond the limit of "
+                    f"{math.degrees(self.swing_limit):.0f}°"
+                )
         return None
 
     def check_compute(self, compute: float) -> str | None:
