@@ -20,9 +20,9 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
-use super::runner::SimError;
+use super::runner::{check_state, PlantSample, SimError};
 use super::scenario::Scenario;
-use super::trace::{Trace, TraceRow, DOUBLE_COLUMNS, TRACE_COLUMNS};
+use super::trace::{Trace, DOUBLE_COLUMNS, TRACE_COLUMNS};
 use crate::config::{in_range, non_negative, positive, ConfigError};
 use crate::plant::dynamics::swing_angles;
 use crate::plant::{
@@ -369,7 +369,7 @@ impl HilPlant {
         self.ground_contact();
         self.payload_contact();
         self.step += 1;
-        self.check_finite()
+        check_state(&self.state, self.time())
     }
 
     /// The ground holds the vehicle up: no sinking, no sliding, level at its yaw.
@@ -440,22 +440,6 @@ impl HilPlant {
             if lowest.z >= 0.0 {
                 self.payload_lifted = false;
             }
-        }
-    }
-
-    fn check_finite(&self) -> Result<(), SimError> {
-        let s = &self.state;
-        let ok = s.pos.iter().all(|x| x.is_finite() && x.abs() < 1e6)
-            && s.vel.iter().all(|x| x.is_finite() && x.abs() < 1e3)
-            && s.rate.iter().all(|x| x.is_finite() && x.abs() < 1e4)
-            && s.att.coords.iter().all(|x| x.is_finite());
-        if ok {
-            Ok(())
-        } else {
-            Err(SimError::Diverged {
-                t: self.time(),
-                what: "vehicle state is not finite or out of range".into(),
-            })
         }
     }
 
@@ -559,7 +543,6 @@ impl HilPlant {
 
     fn log_row(&mut self) {
         let s = &self.state;
-        let (roll, pitch, yaw) = UnitQuaternion::from_quaternion(s.att).euler_angles();
         let truth = self.true_swing();
         let meas = self.measured_swing();
         let payload = if self.payload_lifted {
@@ -567,40 +550,16 @@ impl HilPlant {
         } else {
             s.pos
         };
-        let row = TraceRow {
+        // PX4's setpoints are PX4's (its ULog has them): NaN here.
+        let row = PlantSample {
             t: self.time(),
-            pn: s.pos.x,
-            pe: s.pos.y,
-            pd: s.pos.z,
-            vn: s.vel.x,
-            ve: s.vel.y,
-            vd: s.vel.z,
-            roll,
-            pitch,
-            yaw,
-            swing_n: meas[0],
-            swing_e: meas[1],
-            swing_rate_n: truth[2],
-            swing_rate_e: truth[3],
-            // PX4's setpoints are PX4's: its ULog has them.
-            acc_sp_n: f64::NAN,
-            acc_sp_e: f64::NAN,
-            acc_sp_d: f64::NAN,
-            vel_sp_n: f64::NAN,
-            vel_sp_e: f64::NAN,
-            vel_sp_d: f64::NAN,
-            thrust: s.thrust.sum(),
-            wind_n: self.wind_now.x,
-            wind_e: self.wind_now.y,
-            wind_d: self.wind_now.z,
-            swing_true_n: truth[0],
-            swing_true_e: truth[1],
-            payload_pn: payload.x,
-            payload_pe: payload.y,
-            payload_pd: payload.z,
-            ctrl_active: 0.0,
-            fallback: 0.0,
-        };
+            state: s,
+            measured: meas,
+            truth,
+            payload,
+            wind: self.wind_now,
+        }
+        .row();
         let vals = row.values();
         let mut k = vals.len();
         self.row[..k].copy_from_slice(&vals);

@@ -54,6 +54,79 @@ impl Categorized for SimError {
     }
 }
 
+/// A vehicle state a trace row can show: finite, and within any sensible flight envelope.
+pub(crate) fn check_state(s: &PlantState, t: f64) -> Result<(), SimError> {
+    let ok = s.pos.iter().all(|x| x.is_finite() && x.abs() < 1e6)
+        && s.vel.iter().all(|x| x.is_finite() && x.abs() < 1e3)
+        && s.rate.iter().all(|x| x.is_finite() && x.abs() < 1e4)
+        && s.att.coords.iter().all(|x| x.is_finite());
+    if ok {
+        Ok(())
+    } else {
+        Err(SimError::Diverged {
+            t,
+            what: "vehicle state is not finite or out of range".into(),
+        })
+    }
+}
+
+/// What the plant contributes to a trace row (every column but the controller's).
+pub(crate) struct PlantSample<'a> {
+    /// Time [s].
+    pub t: f64,
+    /// The plant state.
+    pub state: &'a PlantState,
+    /// Measured swing (N, E) [rad].
+    pub measured: [f64; 2],
+    /// True swing and rates (N, E, rate N, rate E).
+    pub truth: [f64; 4],
+    /// Position of the (first) payload mass, NED [m].
+    pub payload: Vector3<f64>,
+    /// Wind, NED [m/s].
+    pub wind: Vector3<f64>,
+}
+
+impl PlantSample<'_> {
+    /// The row with the controller's columns NaN (setpoints) and 0 (flags).
+    pub fn row(&self) -> TraceRow {
+        let s = self.state;
+        let (roll, pitch, yaw) = UnitQuaternion::from_quaternion(s.att).euler_angles();
+        TraceRow {
+            t: self.t,
+            pn: s.pos.x,
+            pe: s.pos.y,
+            pd: s.pos.z,
+            vn: s.vel.x,
+            ve: s.vel.y,
+            vd: s.vel.z,
+            roll,
+            pitch,
+            yaw,
+            swing_n: self.measured[0],
+            swing_e: self.measured[1],
+            swing_rate_n: self.truth[2],
+            swing_rate_e: self.truth[3],
+            acc_sp_n: f64::NAN,
+            acc_sp_e: f64::NAN,
+            acc_sp_d: f64::NAN,
+            vel_sp_n: f64::NAN,
+            vel_sp_e: f64::NAN,
+            vel_sp_d: f64::NAN,
+            thrust: s.thrust.sum(),
+            wind_n: self.wind.x,
+            wind_e: self.wind.y,
+            wind_d: self.wind.z,
+            swing_true_n: self.truth[0],
+            swing_true_e: self.truth[1],
+            payload_pn: self.payload.x,
+            payload_pe: self.payload.y,
+            payload_pd: self.payload.z,
+            ctrl_active: 0.0,
+            fallback: 0.0,
+        }
+    }
+}
+
 /// Timing statistics of the swing controller's ticks (wall clock; not part of the trace).
 #[derive(Clone, Debug, Default)]
 pub struct TickStats {
@@ -406,25 +479,12 @@ impl Simulator {
     }
 
     fn check_finite(&self) -> Result<(), SimError> {
-        let s = &self.state;
-        let ok = s.pos.iter().all(|x| x.is_finite() && x.abs() < 1e6)
-            && s.vel.iter().all(|x| x.is_finite() && x.abs() < 1e3)
-            && s.rate.iter().all(|x| x.is_finite() && x.abs() < 1e4)
-            && s.att.coords.iter().all(|x| x.is_finite());
-        if ok {
-            Ok(())
-        } else {
-            Err(SimError::Diverged {
-                t: self.time(),
-                what: "vehicle state is not finite or out of range".into(),
-            })
-        }
+        check_state(&self.state, self.time())
     }
 
     /// The current sample of every trace column (what the next logged row would hold).
     pub fn sample(&self) -> TraceRow {
         let s = &self.state;
-        let (roll, pitch, yaw) = UnitQuaternion::from_quaternion(s.att).euler_angles();
         let truth = self.true_swing();
         let meas = self.measured_swing();
         let payload = if self.model.links() > 0 {
@@ -434,38 +494,24 @@ impl Simulator {
         };
         let mut vel_sp = self.fc.vel_sp;
         self.supervisor.override_velocity(&mut vel_sp);
-        TraceRow {
+        let plant = PlantSample {
             t: self.step as f64 * self.h,
-            pn: s.pos.x,
-            pe: s.pos.y,
-            pd: s.pos.z,
-            vn: s.vel.x,
-            ve: s.vel.y,
-            vd: s.vel.z,
-            roll,
-            pitch,
-            yaw,
-            swing_n: meas[0],
-            swing_e: meas[1],
-            swing_rate_n: truth[2],
-            swing_rate_e: truth[3],
+            state: s,
+            measured: meas,
+            truth,
+            payload,
+            wind: self.wind_now,
+        };
+        TraceRow {
             acc_sp_n: self.fc.acc_sp.x,
             acc_sp_e: self.fc.acc_sp.y,
             acc_sp_d: self.fc.acc_sp.z,
             vel_sp_n: vel_sp.x,
             vel_sp_e: vel_sp.y,
             vel_sp_d: vel_sp.z,
-            thrust: s.thrust.sum(),
-            wind_n: self.wind_now.x,
-            wind_e: self.wind_now.y,
-            wind_d: self.wind_now.z,
-            swing_true_n: truth[0],
-            swing_true_e: truth[1],
-            payload_pn: payload.x,
-            payload_pe: payload.y,
-            payload_pd: payload.z,
             ctrl_active: self.supervisor.active() as u8 as f64,
             fallback: self.supervisor.fell_back() as u8 as f64,
+            ..plant.row()
         }
     }
 
