@@ -1022,3 +1022,42 @@ fn measurement_noise_reaches_the_command_attenuated() {
         );
     }
 }
+
+/// The linear loop's eigenvalues decide what a short flight cannot: a plant with a slightly
+/// unstable loop under the MPC (found by scaling the input gain until the largest closed-loop
+/// eigenvalue modulus passes 1) counts as diverged, and a gain just below that one flies.
+#[test]
+fn step_check_rejects_an_unstable_linear_loop_before_flying() {
+    use swing_core::control::check::{closed_loop_radius, mpc_step_check, StepCheckSettings};
+    let m = model(0.2, 1.0, 8);
+    let mpc = MpcController::new(&m, MpcSettings::default()).unwrap();
+    let scaled = |k: f64| {
+        let mut p = m.clone();
+        p.b *= k;
+        p
+    };
+    assert!(closed_loop_radius(&mpc, &m, &m, 0.0).unwrap() < 1.0);
+    // Smallest gain factor on a 0.1 grid whose loop is unstable.
+    let k_bad = (10..200)
+        .map(|i| i as f64 * 0.1)
+        .find(|k| closed_loop_radius(&mpc, &m, &scaled(*k), 0.0).unwrap() >= 1.0)
+        .expect("a large enough input gain destabilises the loop");
+    let r = mpc_step_check(
+        &m,
+        MpcSettings::default(),
+        &scaled(k_bad),
+        &StepCheckSettings::default(),
+    )
+    .unwrap();
+    assert!(r.final_error.is_infinite(), "{r:?}");
+    let r = mpc_step_check(
+        &m,
+        MpcSettings::default(),
+        &scaled(k_bad - 0.1),
+        &StepCheckSettings::default(),
+    )
+    .unwrap();
+    assert!(r.final_error.is_finite(), "{r:?}");
+    // A bad lag factor is a typed error.
+    assert!(closed_loop_radius(&mpc, &m, &m, 1.5).is_err());
+}

@@ -9,6 +9,13 @@
 //! *different*, physically structured plant (the white-box model of the same data: a true
 //! velocity integrator and one pendulum), optionally behind a first-order input lag: hold,
 //! velocity step, hold. A model whose MPC cannot hold and track that plant is not one to fly.
+//! Before flying, the unconstrained loop (the MPC's linear law and Kalman filter, the plant
+//! and the lag) is checked for an eigenvalue on or outside the unit circle: such a loop
+//! counts as diverged even when its growth is too slow to show within the check.
+//!
+//! The same linear loop driven by white measurement noise ([`noise_loop`], [`noise_gain`])
+//! gives the stationary RMS of the command and of its tick-to-tick change: how much sensor
+//! noise the MPC passes on to the attitude loop.
 
 use crate::config::{finite, non_negative, positive, ConfigError};
 use std::ops::{AddAssign, SubAssign};
@@ -169,12 +176,21 @@ pub fn step_check_with(
     } else {
         0.0
     };
+    let step = check.step.abs();
+    // An unconstrained loop with an eigenvalue outside the unit circle grows into a limit
+    // cycle against the acceleration bound in flight, however slowly it shows in 20 s.
+    if closed_loop_radius(mpc, controller, plant, lag)? >= 1.0 {
+        return Ok(StepCheck {
+            overshoot: f64::INFINITY,
+            final_error: f64::INFINITY,
+            hold_drift: 0.0,
+        });
+    }
     let mut applied = vec![0.0; m];
     let mut state = vec![AxisState::default(); m];
     let mut vel_ref = vec![0.0; m];
     let mut out = vec![0.0; m];
     mpc.reset(&state, &out);
-    let step = check.step.abs();
     let mut result = StepCheck {
         overshoot: f64::NEG_INFINITY,
         final_error: 0.0,
@@ -263,7 +279,24 @@ pub fn noise_loop(
     controller: &LinearModel,
     plant: &LinearModel,
 ) -> Result<NoiseLoop, ControlError> {
+    lagged_noise_loop(mpc, controller, plant, 0.0)
+}
+
+/// [`noise_loop`] with the step check's first-order lag between controller and plant:
+/// a⁺ = λ a + (1 − λ) u, the plant driven by a⁺ (λ = exp(−dt/τ), 0 = no lag); the lag
+/// states are appended to the plant's z in X.
+pub fn lagged_noise_loop(
+    mpc: &MpcController,
+    controller: &LinearModel,
+    plant: &LinearModel,
+    lag: f64,
+) -> Result<NoiseLoop, ControlError> {
     check_plant(controller, plant)?;
+    if !(0.0..1.0).contains(&lag) {
+        return Err(
+            ConfigError::new("input_lag", format!("lag factor {lag} not in [0, 1)")).into(),
+        );
+    }
     let layout = crate::control::AxisLayout::from_model(plant)?;
     let (sources, _, n) = mpc.frame_layout();
     let aug = mpc.augmented();
@@ -273,8 +306,28 @@ pub fn noise_loop(
     let nm = aug.nm;
     let nx = aug.nx();
     let nz = controller.states.len() * controller.delays;
-    let np = plant.a.nrows();
+    let nzp = plant.a.nrows();
     let pn = plant.states.len();
+    let mp = plant.b.ncols();
+    // Plant with the lag: [z; a]⁺ = [A  λB; 0  λI] [z; a] + [(1 − λ)B; (1 − λ)I] u.
+    let np = if lag > 0.0 { nzp + mp } else { nzp };
+    let mut plant_a = DMatrix::<f64>::zeros(np, np);
+    let mut plant_b = DMatrix::<f64>::zeros(np, mp);
+    plant_a.view_mut((0, 0), (nzp, nzp)).copy_from(&plant.a);
+    if lag > 0.0 {
+        plant_a
+            .view_mut((0, nzp), (nzp, mp))
+            .copy_from(&(&plant.b * lag));
+        plant_b
+            .view_mut((0, 0), (nzp, mp))
+            .copy_from(&(&plant.b * (1.0 - lag)));
+        for i in 0..mp {
+            plant_a[(nzp + i, nzp + i)] = lag;
+            plant_b[(nzp + i, i)] = 1.0 - lag;
+        }
+    } else {
+        plant_b.copy_from(&plant.b);
+    }
     if layout.len() != m {
         return Err(ControlError::Model(format!(
             "plant has {} axes, the controller {m}",
@@ -347,9 +400,9 @@ pub fn noise_loop(
     let d_du = d_u.clone();
     let mut acl = DMatrix::<f64>::zeros(dim, dim);
     let mut bcl = DMatrix::<f64>::zeros(dim, n);
-    acl.view_mut((iz, iz), (np, np)).copy_from(&plant.a);
-    acl.rows_mut(iz, np).add_assign(&(&plant.b * &c_u));
-    bcl.rows_mut(iz, np).copy_from(&(&plant.b * &d_u));
+    acl.view_mut((iz, iz), (np, np)).copy_from(&plant_a);
+    acl.rows_mut(iz, np).add_assign(&(&plant_b * &c_u));
+    bcl.rows_mut(iz, np).copy_from(&(&plant_b * &d_u));
     acl.view_mut((iy, iz), (nm, np)).copy_from(&emz);
     acl.view_mut((iy, iy), (nm, nm)).copy_from(&sh);
     bcl.rows_mut(iy, nm).copy_from(&e);
@@ -367,6 +420,21 @@ pub fn noise_loop(
         c_du,
         d_du,
     })
+}
+
+/// Largest eigenvalue modulus of the unconstrained closed loop of `mpc` (designed on
+/// `controller`) and `plant` behind a first-order lag of factor `lag` ([`lagged_noise_loop`]).
+pub fn closed_loop_radius(
+    mpc: &MpcController,
+    controller: &LinearModel,
+    plant: &LinearModel,
+    lag: f64,
+) -> Result<f64, ControlError> {
+    let nl = lagged_noise_loop(mpc, controller, plant, lag)?;
+    let ev = crate::control::riccati::eigenvalues(&nl.a).ok_or_else(|| {
+        ControlError::Synthesis("closed-loop eigenvalues did not converge".into())
+    })?;
+    Ok(ev.iter().map(|c| c.norm()).fold(0.0, f64::max))
 }
 
 /// Closed-loop eigenvalues and the stationary RMS of u and Δu of `mpc` (designed on
