@@ -61,7 +61,9 @@ def test_mpc_binding_steps_and_checks_its_inputs(default_models):
     state = np.array([[0.0, 0.0, 0.0]])
     mpc.reset(state, np.array([0.0]))
     a = mpc.step(state, np.array([2.0]))
-    assert a.shape == (1,) and a[0] > 0.5  # accelerates towards the 2 m/s reference
+    # Accelerates towards the 2 m/s reference; the input-rate weight spreads the first
+    # move (about 0.4 m/s²) over the next ticks.
+    assert a.shape == (1,) and a[0] > 0.3
     pred = mpc.predicted()
     assert pred.shape == (100, 1, 3)
     with pytest.raises(swingrt.errors.DataError):

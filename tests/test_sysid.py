@@ -511,9 +511,9 @@ def _grid_case(case):
 
 def test_select_for_control_rejects_the_nmae_best_model_that_cannot_fly():
     """payload-grid mp0.3_l1, seed 0: with a coarse grid of p steps of 5 refined around one
-    winner (scored from sample 61), the NMAE-best (q, p) leaves the MPC 0.2 m/s short of the
-    setpoint after 28 s in flight; the closed-loop check rejects it and the model it selects
-    tracks the step without offset on the full simulator."""
+    winner (scored from sample 61), the NMAE-best (q, p) leaves the MPC creeping towards the
+    setpoint with a slowly settling swing in flight; the closed-loop check rejects it and the
+    model it selects tracks the step without offset on the full simulator."""
     _need_sim()
     from swingrt.experiments import simulate_controller
     from swingrt.metrics import step_metrics
@@ -534,7 +534,10 @@ def test_select_for_control_rejects_the_nmae_best_model_that_cannot_fly():
         flown[name] = step_metrics(trace, t0=2.0)
     assert flown["selected"]["ss_error"] < 0.02, flown
     assert math.isfinite(flown["selected"]["v_settle_s"]), flown
-    assert flown["nmae_best"]["ss_error"] > 0.05, flown  # the failure this guards against
+    # The failure this guards against: the NMAE-best model's MPC creeps (the swing settles
+    # four times later and its IAE is nearly three times the selected model's).
+    assert flown["nmae_best"]["swing_settle_s"] > 2 * flown["selected"]["swing_settle_s"], flown
+    assert flown["nmae_best"]["swing_iae_deg_s"] > 2 * flown["selected"]["swing_iae_deg_s"], flown
 
 
 def test_select_for_control_bounds():

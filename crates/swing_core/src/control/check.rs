@@ -9,10 +9,21 @@
 //! *different*, physically structured plant (the white-box model of the same data: a true
 //! velocity integrator and one pendulum), optionally behind a first-order input lag: hold,
 //! velocity step, hold. A model whose MPC cannot hold and track that plant is not one to fly.
+//! Before flying, the unconstrained loop (the MPC's linear law and Kalman filter, the plant
+//! and the lag) is checked for an eigenvalue on or outside the unit circle: such a loop
+//! counts as diverged even when its growth is too slow to show within the check.
+//!
+//! The same linear loop driven by white measurement noise ([`noise_loop`], [`noise_gain`])
+//! gives the stationary RMS of the command and of its tick-to-tick change: how much sensor
+//! noise the MPC passes on to the attitude loop.
 
 use crate::config::{finite, non_negative, positive, ConfigError};
+use std::ops::{AddAssign, SubAssign};
+
+use nalgebra::DMatrix;
+
 use crate::control::{
-    AxisState, ControlError, LinearPlant, MpcController, MpcSettings, SwingController,
+    AxisState, ControlError, LinearPlant, Measured, MpcController, MpcSettings, SwingController,
 };
 use crate::sysid::LinearModel;
 
@@ -165,12 +176,21 @@ pub fn step_check_with(
     } else {
         0.0
     };
+    let step = check.step.abs();
+    // An unconstrained loop with an eigenvalue outside the unit circle grows into a limit
+    // cycle against the acceleration bound in flight, however slowly it shows in 20 s.
+    if closed_loop_radius(mpc, controller, plant, lag)? >= 1.0 {
+        return Ok(StepCheck {
+            overshoot: f64::INFINITY,
+            final_error: f64::INFINITY,
+            hold_drift: 0.0,
+        });
+    }
     let mut applied = vec![0.0; m];
     let mut state = vec![AxisState::default(); m];
     let mut vel_ref = vec![0.0; m];
     let mut out = vec![0.0; m];
     mpc.reset(&state, &out);
-    let step = check.step.abs();
     let mut result = StepCheck {
         overshoot: f64::NEG_INFINITY,
         final_error: 0.0,
@@ -206,4 +226,282 @@ pub fn step_check_with(
             .max(if e.is_finite() { e } else { f64::INFINITY });
     }
     Ok(result)
+}
+
+/// Standard deviations of white measurement noise on each measured quantity, per tick.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MeasurementNoise {
+    /// Velocity noise [m/s].
+    pub velocity: f64,
+    /// Swing-angle noise [rad].
+    pub swing: f64,
+    /// Swing-rate noise [rad/s] (only for models with a swing-rate state).
+    pub swing_rate: f64,
+}
+
+/// The unconstrained MPC (its linear law U* and Kalman filter) in closed loop with a linear
+/// plant, driven by white measurement noise e on the controller's newest frame:
+/// X⁺ = A X + B e, u = C_u X + D_u e, Δu = u − u_prev = C_du X + D_du e, with
+/// X = [plant z; controller's previous delay stack; Kalman prior ξ̂; previous input].
+#[derive(Clone, Debug)]
+pub struct NoiseLoop {
+    /// Closed-loop state matrix.
+    pub a: DMatrix<f64>,
+    /// Noise input matrix (one column per model state of the newest frame).
+    pub b: DMatrix<f64>,
+    /// Input map from the state.
+    pub c_u: DMatrix<f64>,
+    /// Input map from the noise.
+    pub d_u: DMatrix<f64>,
+    /// Input-increment map from the state.
+    pub c_du: DMatrix<f64>,
+    /// Input-increment map from the noise.
+    pub d_du: DMatrix<f64>,
+}
+
+/// What measurement noise does to the commands of an MPC in closed loop ([`noise_gain`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct NoiseGain {
+    /// Closed-loop eigenvalues (re, im), largest modulus first.
+    pub eigenvalues: Vec<(f64, f64)>,
+    /// Largest closed-loop eigenvalue modulus (≥ 1: unstable, the RMS figures are ∞).
+    pub spectral_radius: f64,
+    /// Stationary RMS of the acceleration setpoint over the axes [m/s²] (H2 norm of the
+    /// noise → u map with the given noise levels).
+    pub rms_u: f64,
+    /// Stationary RMS of the tick-to-tick setpoint change over the axes [m/s²].
+    pub rms_du: f64,
+}
+
+/// Build the [`NoiseLoop`] of `mpc` (designed on `controller`) flying `plant`.
+pub fn noise_loop(
+    mpc: &MpcController,
+    controller: &LinearModel,
+    plant: &LinearModel,
+) -> Result<NoiseLoop, ControlError> {
+    lagged_noise_loop(mpc, controller, plant, 0.0)
+}
+
+/// [`noise_loop`] with the step check's first-order lag between controller and plant:
+/// a⁺ = λ a + (1 − λ) u, the plant driven by a⁺ (λ = exp(−dt/τ), 0 = no lag); the lag
+/// states are appended to the plant's z in X.
+pub fn lagged_noise_loop(
+    mpc: &MpcController,
+    controller: &LinearModel,
+    plant: &LinearModel,
+    lag: f64,
+) -> Result<NoiseLoop, ControlError> {
+    check_plant(controller, plant)?;
+    if !(0.0..1.0).contains(&lag) {
+        return Err(
+            ConfigError::new("input_lag", format!("lag factor {lag} not in [0, 1)")).into(),
+        );
+    }
+    let layout = crate::control::AxisLayout::from_model(plant)?;
+    let (sources, _, n) = mpc.frame_layout();
+    let aug = mpc.augmented();
+    let cond = mpc.condensed();
+    let kf = mpc.estimator();
+    let m = aug.m;
+    let nm = aug.nm;
+    let nx = aug.nx();
+    let nz = controller.states.len() * controller.delays;
+    let nzp = plant.a.nrows();
+    let pn = plant.states.len();
+    let mp = plant.b.ncols();
+    // Plant with the lag: [z; a]⁺ = [A  λB; 0  λI] [z; a] + [(1 − λ)B; (1 − λ)I] u.
+    let np = if lag > 0.0 { nzp + mp } else { nzp };
+    let mut plant_a = DMatrix::<f64>::zeros(np, np);
+    let mut plant_b = DMatrix::<f64>::zeros(np, mp);
+    plant_a.view_mut((0, 0), (nzp, nzp)).copy_from(&plant.a);
+    if lag > 0.0 {
+        plant_a
+            .view_mut((0, nzp), (nzp, mp))
+            .copy_from(&(&plant.b * lag));
+        plant_b
+            .view_mut((0, 0), (nzp, mp))
+            .copy_from(&(&plant.b * (1.0 - lag)));
+        for i in 0..mp {
+            plant_a[(nzp + i, nzp + i)] = lag;
+            plant_b[(nzp + i, i)] = 1.0 - lag;
+        }
+    } else {
+        plant_b.copy_from(&plant.b);
+    }
+    if layout.len() != m {
+        return Err(ControlError::Model(format!(
+            "plant has {} axes, the controller {m}",
+            layout.len()
+        )));
+    }
+    // Frame = M_z z + e.
+    let mut mz = DMatrix::<f64>::zeros(n, np);
+    for (k, src) in sources.iter().enumerate() {
+        match *src {
+            Measured::V(a) => mz[(k, layout.axes()[a].v)] = 1.0,
+            Measured::Swing(a) => mz[(k, layout.axes()[a].swing)] = 1.0,
+            Measured::SwingRate(a) => {
+                let ax = &layout.axes()[a];
+                if let Some(i) = ax.swing_rate {
+                    mz[(k, i)] = 1.0;
+                } else if plant.delays >= 2 {
+                    mz[(k, ax.swing)] = 1.0 / plant.dt;
+                    mz[(k, ax.swing + pn)] = -1.0 / plant.dt;
+                } else {
+                    return Err(ControlError::Model(
+                        "the plant has neither a swing rate nor a previous frame".into(),
+                    ));
+                }
+            }
+        }
+    }
+    // y = S_h y_prev + E frame (the controller's `push_frame`).
+    let mut sh = DMatrix::<f64>::zeros(nm, nm);
+    for i in n..nz {
+        sh[(i, i - n)] = 1.0;
+    }
+    for &(dst, src) in &aug.lag_copies {
+        sh[(dst, src)] = 1.0;
+    }
+    let mut e = DMatrix::<f64>::zeros(nm, n);
+    for k in 0..n {
+        e[(k, k)] = 1.0;
+    }
+    // post = P_y y + P_p prior.
+    // The filter measures the first ny entries of the stack (innovation y[..ny] − ξ̂[..ny]).
+    let l = kf.gain();
+    let ny = l.ncols();
+    let mut py = DMatrix::<f64>::zeros(nx, nm);
+    py.columns_mut(0, ny).copy_from(l);
+    let mut pp = DMatrix::<f64>::identity(nx, nx);
+    pp.columns_mut(0, ny).sub_assign(l);
+    if mpc.settings().measured_state {
+        py.rows_mut(0, nm).fill_with_identity();
+        pp.rows_mut(0, nm).fill(0.0);
+    }
+    let (iz, iy, ip, iu) = (0, np, np + nm, np + nm + nx);
+    let dim = iu + m;
+    let emz = &e * &mz;
+    // post = G X + G_e e.
+    let mut g = DMatrix::<f64>::zeros(nx, dim);
+    g.columns_mut(iz, np).copy_from(&(&py * &emz));
+    g.columns_mut(iy, nm).copy_from(&(&py * &sh));
+    g.columns_mut(ip, nx).copy_from(&pp);
+    let ge = &py * &e;
+    let k1 = cond.k_xi.rows(0, m).into_owned();
+    let ku1 = cond.k_u.rows(0, m).into_owned();
+    let mut c_u = &k1 * &g;
+    c_u.columns_mut(iu, m).add_assign(&ku1);
+    let d_u = &k1 * &ge;
+    let mut c_du = c_u.clone();
+    for a in 0..m {
+        c_du[(a, iu + a)] -= 1.0;
+    }
+    let d_du = d_u.clone();
+    let mut acl = DMatrix::<f64>::zeros(dim, dim);
+    let mut bcl = DMatrix::<f64>::zeros(dim, n);
+    acl.view_mut((iz, iz), (np, np)).copy_from(&plant_a);
+    acl.rows_mut(iz, np).add_assign(&(&plant_b * &c_u));
+    bcl.rows_mut(iz, np).copy_from(&(&plant_b * &d_u));
+    acl.view_mut((iy, iz), (nm, np)).copy_from(&emz);
+    acl.view_mut((iy, iy), (nm, nm)).copy_from(&sh);
+    bcl.rows_mut(iy, nm).copy_from(&e);
+    acl.rows_mut(ip, nx)
+        .copy_from(&(&aug.a * &g + &aug.b * &c_u));
+    bcl.rows_mut(ip, nx)
+        .copy_from(&(&aug.a * &ge + &aug.b * &d_u));
+    acl.rows_mut(iu, m).copy_from(&c_u);
+    bcl.rows_mut(iu, m).copy_from(&d_u);
+    Ok(NoiseLoop {
+        a: acl,
+        b: bcl,
+        c_u,
+        d_u,
+        c_du,
+        d_du,
+    })
+}
+
+/// Largest eigenvalue modulus of the unconstrained closed loop of `mpc` (designed on
+/// `controller`) and `plant` behind a first-order lag of factor `lag` ([`lagged_noise_loop`]).
+pub fn closed_loop_radius(
+    mpc: &MpcController,
+    controller: &LinearModel,
+    plant: &LinearModel,
+    lag: f64,
+) -> Result<f64, ControlError> {
+    let nl = lagged_noise_loop(mpc, controller, plant, lag)?;
+    let ev = crate::control::riccati::eigenvalues(&nl.a).ok_or_else(|| {
+        ControlError::Synthesis("closed-loop eigenvalues did not converge".into())
+    })?;
+    Ok(ev.iter().map(|c| c.norm()).fold(0.0, f64::max))
+}
+
+/// Closed-loop eigenvalues and the stationary RMS of u and Δu of `mpc` (designed on
+/// `controller`, unconstrained) flying `plant` with white measurement noise of `noise`.
+pub fn noise_gain(
+    mpc: &MpcController,
+    controller: &LinearModel,
+    plant: &LinearModel,
+    noise: MeasurementNoise,
+) -> Result<NoiseGain, ControlError> {
+    let nl = noise_loop(mpc, controller, plant)?;
+    let (sources, _, _) = mpc.frame_layout();
+    let w: Vec<f64> = sources
+        .iter()
+        .map(|s| match s {
+            Measured::V(_) => noise.velocity,
+            Measured::Swing(_) => noise.swing,
+            Measured::SwingRate(_) => noise.swing_rate,
+        })
+        .collect();
+    for (name, v) in [
+        ("velocity", noise.velocity),
+        ("swing", noise.swing),
+        ("swing_rate", noise.swing_rate),
+    ] {
+        non_negative(name, v)?;
+    }
+    let ev = crate::control::riccati::eigenvalues(&nl.a).ok_or_else(|| {
+        ControlError::Synthesis("closed-loop eigenvalues did not converge".into())
+    })?;
+    let mut eigenvalues: Vec<(f64, f64)> = ev.iter().map(|c| (c.re, c.im)).collect();
+    eigenvalues.sort_by(|x, y| x.0.hypot(x.1).total_cmp(&y.0.hypot(y.1)).reverse());
+    let spectral_radius = eigenvalues.first().map_or(0.0, |x| x.0.hypot(x.1));
+    if spectral_radius >= 1.0 {
+        return Ok(NoiseGain {
+            eigenvalues,
+            spectral_radius,
+            rms_u: f64::INFINITY,
+            rms_du: f64::INFINITY,
+        });
+    }
+    // Stationary covariance P = A P Aᵀ + B W Bᵀ by doubling: P ← P + Aᵏ P (Aᵏ)ᵀ, Aᵏ ← (Aᵏ)².
+    let mut bw = nl.b.clone();
+    for (j, s) in w.iter().enumerate() {
+        bw.column_mut(j).scale_mut(*s);
+    }
+    let mut p = &bw * bw.transpose();
+    let mut ak = nl.a.clone();
+    for _ in 0..60 {
+        let inc = &ak * &p * ak.transpose();
+        p += &inc;
+        ak = &ak * &ak;
+        if inc.amax() <= 1e-15 * p.amax().max(f64::MIN_POSITIVE) {
+            break;
+        }
+    }
+    let rms = |c: &DMatrix<f64>, d: &DMatrix<f64>| {
+        let mut dw = d.clone();
+        for (j, s) in w.iter().enumerate() {
+            dw.column_mut(j).scale_mut(*s);
+        }
+        ((c * &p * c.transpose()).trace() + (&dw * dw.transpose()).trace()).sqrt()
+    };
+    Ok(NoiseGain {
+        eigenvalues,
+        spectral_radius,
+        rms_u: rms(&nl.c_u, &nl.d_u),
+        rms_du: rms(&nl.c_du, &nl.d_du),
+    })
 }

@@ -462,7 +462,8 @@ pub fn coarse_to_fine(
 ///    optimum is often one p wide) and the grid's rank steps above.
 /// 2. **Refinement**: unit steps within ±`q_radius`, ±`p_radius` around the best stable
 ///    candidate of each of the `winners` delay counts whose best stable NMAE is lowest
-///    (several, because near-equal optima at distant q are common).
+///    (several, because near-equal optima at distant q are common), and around the best
+///    rank of each of those q above `dense_ranks` (a narrow optimum between two grid ranks).
 ///
 /// The better of the two stages' screened winners is returned.
 #[allow(clippy::too_many_arguments)]
@@ -497,13 +498,28 @@ pub fn refine(
     per_q.sort_by(|a, b| a.nmae.total_cmp(&b.nmae));
     let q_top = coarse.delays.iter().copied().max().unwrap_or(1) + q_radius;
     let q_top = q_top.min(settings.score_delays.max(1)).max(1);
+    // Around each winner's best rank, and around its best rank of the stepped part of the
+    // grid (above `dense_ranks`): a narrow optimum of the high ranks hides between grid steps
+    // even when a low dense rank is the q's best so far.
+    let stepped_best = |q: usize| -> Option<usize> {
+        first
+            .table
+            .iter()
+            .filter(|c| c.delays == q && c.rank > dense_ranks && c.nmae.is_finite())
+            .min_by(|a, b| a.nmae.total_cmp(&b.nmae))
+            .map(|c| c.rank)
+    };
     let mut windows: Vec<(usize, Vec<(usize, usize)>)> = Vec::new();
     for c in per_q.iter().take(winners.max(1)) {
-        let w = (c.rank.saturating_sub(p_radius).max(1), c.rank + p_radius);
-        for q in c.delays.saturating_sub(q_radius).max(1)..=(c.delays + q_radius).min(q_top) {
-            match windows.iter_mut().find(|(wq, _)| *wq == q) {
-                Some((_, ws)) => ws.push(w),
-                None => windows.push((q, vec![w])),
+        let mut centres = vec![c.rank];
+        centres.extend(stepped_best(c.delays).filter(|p| *p != c.rank));
+        for p in centres {
+            let w = (p.saturating_sub(p_radius).max(1), p + p_radius);
+            for q in c.delays.saturating_sub(q_radius).max(1)..=(c.delays + q_radius).min(q_top) {
+                match windows.iter_mut().find(|(wq, _)| *wq == q) {
+                    Some((_, ws)) => ws.push(w),
+                    None => windows.push((q, vec![w])),
+                }
             }
         }
     }

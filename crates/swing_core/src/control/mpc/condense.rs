@@ -2,9 +2,15 @@
 //!
 //! **Augmented model.** From the identified model z⁺ = A z + B (u − ū) + c (DESIGN §7) the
 //! MPC builds ξ = [z; s⁻; d] with
-//! * s⁻ the previous swing angle of each axis, only when q = 1 (otherwise the previous swing
-//!   is already in the second frame of z), so that the swing rate is an output by backward
-//!   difference, ṡ_k = (s_k − s_{k−1})/T_s (eq. 5.26–5.27);
+//! * s⁻ the swing angles of each axis one and two ticks back that the delay stack does not
+//!   already hold (both when q = 1, the older one when q = 2, none for q ≥ 3), so that the
+//!   swing rate is an output by the two-tick difference ṡ_k = (s_k − s_{k−2})/(2 T_s). The
+//!   seed's one-tick backward difference (eq. 5.26–5.27) has its largest gain, 2/T_s, at the
+//!   Nyquist frequency, where a rank-truncated delay model has spurious lightly damped modes
+//!   (eigenvalues near −0.8) and measurement noise has its power: a swing-rate weight on it
+//!   makes the MPC fight period-2 content it cannot control, and the command chatters. The
+//!   two-tick difference has the same gain at the swing frequency (≈ 0.5 Hz, T_s = 30 ms:
+//!   within 1 %) and none at Nyquist;
 //! * d the constant disturbances (d⁺ = d) of eq. 5.32–5.33, in one of three layouts
 //!   ([`DisturbanceModel`]): `velocity` — the seed's B_ud: one per axis on the velocity row
 //!   of the newest frame, entering as T_s·d (d in m/s²); `input` — one per axis entering
@@ -65,6 +71,10 @@ pub struct Augmented {
     pub cy: DMatrix<f64>,
     /// Number of measured entries (z and s⁻): ξ[0..nm].
     pub nm: usize,
+    /// How the s⁻ entries advance: each (destination, source) pair copies entry `source` of
+    /// the previous ξ into entry `destination`; applied last pair first and before z shifts,
+    /// every copy reads a value of the previous tick.
+    pub lag_copies: Vec<(usize, usize)>,
     /// Number of disturbance states: ξ[nm..nm + nd].
     pub nd: usize,
     /// Number of inputs / axes.
@@ -89,8 +99,31 @@ impl Augmented {
     ) -> Self {
         let nz = a.nrows();
         let m = b.ncols();
-        let extra = if delays == 1 { m } else { 0 };
-        let nm = nz + extra;
+        // s_{k−1} of axis i: in the second frame of z, or extra entry nz + i (q = 1);
+        // s_{k−2}: in the third frame, or the next extra entry.
+        let mut lag_copies = Vec::new();
+        let mut prev = vec![0; m];
+        let mut prev2 = vec![0; m];
+        let mut next = nz;
+        for i in 0..m {
+            if delays >= 2 {
+                prev[i] = is[i] + n;
+            } else {
+                prev[i] = next;
+                lag_copies.push((next, is[i]));
+                next += 1;
+            }
+        }
+        for i in 0..m {
+            if delays >= 3 {
+                prev2[i] = is[i] + 2 * n;
+            } else {
+                prev2[i] = next;
+                lag_copies.push((next, prev[i]));
+                next += 1;
+            }
+        }
+        let nm = next;
         let nd = match disturbance {
             DisturbanceModel::Velocity | DisturbanceModel::Input => m,
             DisturbanceModel::State => n,
@@ -98,10 +131,8 @@ impl Augmented {
         let nx = nm + nd;
         let mut aa = DMatrix::<f64>::zeros(nx, nx);
         aa.view_mut((0, 0), (nz, nz)).copy_from(a);
-        if extra > 0 {
-            for i in 0..m {
-                aa[(nz + i, is[i])] = 1.0;
-            }
+        for &(dst, src) in &lag_copies {
+            aa[(dst, src)] = 1.0;
         }
         for j in 0..nd {
             match disturbance {
@@ -120,10 +151,9 @@ impl Augmented {
         cc.rows_mut(0, nz).copy_from(&(c - b * mu));
         let mut cy = DMatrix::<f64>::zeros(3 * m, nx);
         for i in 0..m {
-            let prev = if delays >= 2 { is[i] + n } else { nz + i };
             cy[(3 * i, iv[i])] = 1.0;
-            cy[(3 * i + 1, is[i])] = 1.0 / dt;
-            cy[(3 * i + 1, prev)] -= 1.0 / dt;
+            cy[(3 * i + 1, is[i])] = 0.5 / dt;
+            cy[(3 * i + 1, prev2[i])] -= 0.5 / dt;
             cy[(3 * i + 2, is[i])] = 1.0;
         }
         Self {
@@ -132,6 +162,7 @@ impl Augmented {
             c: cc,
             cy,
             nm,
+            lag_copies,
             nd,
             m,
         }

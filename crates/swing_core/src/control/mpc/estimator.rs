@@ -1,9 +1,11 @@
 //! Steady-state Kalman filter of the disturbance-augmented model (thesis 5.4.4, eq. 5.32–5.34).
 //!
-//! Model (ξ = [z; d], d the input disturbance on the velocity channel of each axis):
-//! ξ_{k+1} = A ξ_k + B u_k + c̃ + w_k,  y_k = C ξ_k + v_k,  C = [I 0]
-//! (the whole delay stack z is measured: it is built from the measured history),
-//! w ~ N(0, W), v ~ N(0, V). The a-priori covariance P solves the filter DARE
+//! Model (ξ = [z; s⁻; d], the MPC's augmented state):
+//! ξ_{k+1} = A ξ_k + B u_k + c̃ + w_k,  y_k = C ξ_k + v_k,  C = [I_ny 0],
+//! w ~ N(0, W), v ~ N(0, V). The MPC measures only the newest frame (ny = n states): the
+//! older frames of the delay stack are the same measurements shifted, not new ones, so W is
+//! zero on them (the shift is exact) and the filter smooths the whole history from the
+//! stream of newest frames. The a-priori covariance P solves the filter DARE
 //! P = A P Aᵀ − A P Cᵀ (C P Cᵀ + V)⁻¹ C P Aᵀ + W (the dual of the control DARE, solved by
 //! [`crate::control::riccati::dare`] on (Aᵀ, Cᵀ, W, V)); the filter gain is
 //! L = P Cᵀ (C P Cᵀ + V)⁻¹. Each tick: ξ̂_{k|k} = ξ̂_{k|k−1} + L (y_k − C ξ̂_{k|k−1}), and after
@@ -97,7 +99,7 @@ impl SteadyStateKalman {
         self.post.copy_from_slice(xi);
     }
 
-    /// Measurement update with y (length ny); returns the a-posteriori estimate ξ̂_{k|k}.
+    /// Measurement update with y (its first ny entries are the measurement); returns the a-posteriori estimate ξ̂_{k|k}.
     pub fn correct(&mut self, y: &DVector<f64>) -> &DVector<f64> {
         for i in 0..self.ny {
             self.innov[i] = y[i] - self.prior[i];
@@ -107,11 +109,13 @@ impl SteadyStateKalman {
         &self.post
     }
 
-    /// Replace the measured block of the a-posteriori estimate by the measurement itself
+    /// Replace the measured block (all of `y`: the measured delay stack) of the a-posteriori
+    /// estimate by the measurement itself
     /// (after [`Self::correct`]): the state is then the measured delay stack and only the
     /// disturbances are estimated, from the one-step residual of the newest frame.
     pub fn hold_measured(&mut self, y: &DVector<f64>) {
-        self.post.rows_mut(0, self.ny).copy_from(y);
+        let k = y.len().min(self.post.len());
+        self.post.rows_mut(0, k).copy_from(&y.rows(0, k));
     }
 
     /// Time update with the applied input u: ξ̂_{k+1|k} = A ξ̂_{k|k} + B u + c̃.
