@@ -1,6 +1,8 @@
 //! Bindings of `swing_core::sim`: scenarios, the steppable simulator and whole runs.
 
 use numpy::{IntoPyArray, PyArray1};
+use std::sync::{Mutex, MutexGuard};
+
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use swing_core::control::lqr::{LqrController, LqrSettings};
@@ -163,9 +165,21 @@ fn sim_real_time_factor(py: Python<'_>, scenario: &PyScenario, seconds: f64) -> 
 }
 
 /// The steppable closed-loop simulator (vehicle, payload, PX4 cascade, wind).
-#[pyclass(name = "Simulator", module = "swingrt._core", unsendable)]
+#[pyclass(name = "Simulator", module = "swingrt._core")]
 pub struct PySimulator {
-    inner: Simulator,
+    // A Mutex makes the simulator shareable between threads (a Dask worker may drop it on
+    // another thread than it ran on); `&mut self` methods reach it without locking.
+    inner: Mutex<Simulator>,
+}
+
+impl PySimulator {
+    fn sim(&self) -> MutexGuard<'_, Simulator> {
+        self.inner.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn sim_mut(&mut self) -> &mut Simulator {
+        self.inner.get_mut().unwrap_or_else(|e| e.into_inner())
+    }
 }
 
 #[pymethods]
@@ -174,32 +188,32 @@ impl PySimulator {
     #[new]
     fn new(scenario: &PyScenario) -> PyResult<Self> {
         Ok(Self {
-            inner: Simulator::new(scenario.inner.clone()).map_err(to_py)?,
+            inner: Mutex::new(Simulator::new(scenario.inner.clone()).map_err(to_py)?),
         })
     }
 
     /// Current simulated time [s].
     #[getter]
     fn t(&self) -> f64 {
-        self.inner.time()
+        self.sim().time()
     }
 
     /// Scenario duration [s].
     #[getter]
     fn duration(&self) -> f64 {
-        self.inner.duration()
+        self.sim().duration()
     }
 
     /// Physics steps left until the scenario's end.
     #[getter]
     fn steps_left(&self) -> u64 {
-        self.inner.steps_left()
+        self.sim().steps_left()
     }
 
     /// Why the attached controller was handed back to PX4, if it was.
     #[getter]
     fn fallback_reason(&self) -> Option<String> {
-        self.inner.fallback_reason().map(str::to_string)
+        self.sim().fallback_reason().map(str::to_string)
     }
 
     /// Advance by `dt` seconds (GIL released).
@@ -210,13 +224,13 @@ impl PySimulator {
                 format!("must be a finite number >= 0 (got {dt})"),
             )));
         }
-        let inner = &mut self.inner;
+        let inner = self.sim_mut();
         py.detach(|| inner.advance(dt)).map_err(to_py)
     }
 
     /// Run to the scenario's end (GIL released), logging the final sample.
     fn run_to_end(&mut self, py: Python<'_>) -> PyResult<()> {
-        let inner = &mut self.inner;
+        let inner = self.sim_mut();
         py.detach(|| inner.run_to_end()).map_err(to_py)
     }
 
@@ -245,7 +259,7 @@ impl PySimulator {
                 )))
             }
         };
-        self.inner.set_setpoint(axis, sp);
+        self.sim_mut().set_setpoint(axis, sp);
         Ok(())
     }
 
@@ -253,7 +267,7 @@ impl PySimulator {
     /// swing, cascade setpoints).
     fn state<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
-        for (k, v) in self.inner.state_snapshot() {
+        for (k, v) in self.sim().state_snapshot() {
             d.set_item(k, v)?;
         }
         Ok(d)
@@ -261,17 +275,17 @@ impl PySimulator {
 
     /// The trace logged so far, copied into a dict of numpy arrays.
     fn trace<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        trace_to_dict(py, self.inner.trace().clone())
+        trace_to_dict(py, self.sim().trace().clone())
     }
 
     /// Take the trace out (the simulator keeps logging into a fresh one).
     fn take_trace<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        trace_to_dict(py, self.inner.take_trace())
+        trace_to_dict(py, self.sim_mut().take_trace())
     }
 
     /// Wall-clock compute time of every controller tick so far [µs].
     fn tick_times<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        self.inner.tick_stats().tick_us.clone().into_pyarray(py)
+        self.sim().tick_stats().tick_us.clone().into_pyarray(py)
     }
 
     /// Fly the MPC on an identified model in place of PX4's velocity PID on the model's axes
@@ -286,7 +300,7 @@ impl PySimulator {
     ) -> PyResult<()> {
         let settings: MpcSettings = crate::convert::settings(settings, "mpc")?;
         let mpc = MpcController::new(&model.inner, settings).map_err(to_py)?;
-        self.inner
+        self.sim_mut()
             .attach_controller(Box::new(mpc), engage_at, budget)
             .map_err(to_py)
     }
@@ -305,7 +319,7 @@ impl PySimulator {
         let settings: MpcSettings = crate::convert::settings(settings, "mpc")?;
         let adaptive: AdaptiveSettings = crate::convert::settings(adaptive, "adaptive")?;
         let ctrl = AdaptiveMpc::new(&model.inner, settings, adaptive).map_err(to_py)?;
-        self.inner
+        self.sim_mut()
             .attach_controller(Box::new(ctrl), engage_at, budget)
             .map_err(to_py)
     }
@@ -313,7 +327,7 @@ impl PySimulator {
     /// Events of the attached controller so far as (time [s], what, value) tuples, e.g. the
     /// adaptive MPC's `detected`, `requested`, `adopted` and `rejected`.
     fn controller_events(&self) -> Vec<(f64, String, f64)> {
-        self.inner
+        self.sim()
             .controller_events()
             .into_iter()
             .map(|(t, w, v)| (t, w.to_string(), v))
@@ -334,14 +348,14 @@ impl PySimulator {
         let settings: LqrSettings = crate::convert::settings(settings, "lqr")?;
         let params: PendulumModel = crate::convert::from_py(params, "lqr_params")?;
         let lqr = LqrController::new(params, axes, settings).map_err(to_py)?;
-        self.inner
+        self.sim_mut()
             .attach_controller(Box::new(lqr), engage_at, budget)
             .map_err(to_py)
     }
 
     /// Predicted outputs of the attached controller's last tick (MPC), else None.
     fn controller_prediction<'py>(&mut self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
-        self.inner
+        self.sim_mut()
             .controller_prediction()
             .map(|v| v.into_pyarray(py))
     }
@@ -349,7 +363,7 @@ impl PySimulator {
     /// Number of controller ticks that needed the constrained QP.
     #[getter]
     fn constrained_ticks(&self) -> usize {
-        self.inner.tick_stats().constrained
+        self.sim().tick_stats().constrained
     }
 }
 
