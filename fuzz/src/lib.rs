@@ -22,6 +22,7 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("identify", targets::identify),
     ("mpc", targets::mpc),
     ("simulator", targets::simulator),
+    ("hil", targets::hil),
 ];
 
 /// Inputs longer than this are cut: the properties are about malformed content, not size

@@ -10,6 +10,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::de::DeserializeOwned;
 
 use swing_core::config::{from_json_str, from_toml_value, parse_toml};
+use swing_core::control::adaptive::AdaptiveSettings;
 use swing_core::control::mpc::condense::DisturbanceModel;
 use swing_core::control::px4::Px4Params;
 use swing_core::control::selection::{CheckBounds, SelectionSettings};
@@ -18,7 +19,7 @@ use swing_core::control::{
     QpSolverKind, StepCheckSettings, SwingController,
 };
 use swing_core::plant::{PayloadParams, PendulumModel, VehicleParams, WindParams};
-use swing_core::sim::{NoiseParams, Scenario, SetpointEntry, Simulator};
+use swing_core::sim::{HilPlant, HilSettings, NoiseParams, Scenario, SetpointEntry, Simulator};
 use swing_core::sysid::pipeline::{identify as run_identify, payload_mass_from_thrust, ThrustLog};
 use swing_core::sysid::{
     Diagnostics, IdentifyMethod, IdentifySettings, LinearModel, Offset, Trajectory,
@@ -434,7 +435,7 @@ pub fn settings(data: &[u8]) {
     };
     let json = sel & 0x80 != 0;
     let text = text(rest);
-    match (sel & 0x7f) % 13 {
+    match (sel & 0x7f) % 15 {
         0 => {
             if let Some(s) = parse_as::<IdentifySettings>(&text, json) {
                 if s.validate().is_ok() {
@@ -498,6 +499,18 @@ pub fn settings(data: &[u8]) {
         11 => {
             // Checked inside a scenario (its validate is private); here the parse alone.
             let _ = parse_as::<SetpointEntry>(&text, json);
+        }
+        13 => {
+            if let Some(s) = parse_as::<HilSettings>(&text, json) {
+                if s.validate().is_ok() {
+                    let _ = HilPlant::new(Scenario::builtin("hover").expect("built-in"), s);
+                }
+            }
+        }
+        14 => {
+            if let Some(s) = parse_as::<AdaptiveSettings>(&text, json) {
+                let _ = s.validate();
+            }
         }
         _ => {
             // StepCheckSettings has no serde form: its four numbers from the bytes.
@@ -902,5 +915,37 @@ fn simulator_inner(u: &mut Unstructured<'_>) -> AResult<()> {
     let _ = sim.advance(f64::from(steps) * h);
     let trace = sim.trace();
     let _ = trace;
+    Ok(())
+}
+
+/// The hardware-in-the-loop plant under arbitrary motor commands (NaN, ±∞, huge, negative)
+/// from any scenario: every step is a typed error or a physical state, every sensor frame
+/// is finite while the plant is.
+pub fn hil(data: &[u8]) {
+    let mut u = Unstructured::new(data);
+    let _ = hil_inner(&mut u);
+}
+
+fn hil_inner(u: &mut Unstructured<'_>) -> AResult<()> {
+    let base = base_scenario(u)?;
+    let over = scenario_overrides_from(u, &base)?;
+    let Ok(sc) = base.with_overrides(over) else {
+        return Ok(());
+    };
+    let Ok(mut plant) = HilPlant::new(sc, HilSettings::default()) else {
+        return Ok(());
+    };
+    let steps = u.int_in_range(1u32..=100)?;
+    for _ in 0..steps {
+        let frame = plant.sensors();
+        assert!(
+            frame.accel.iter().chain(&frame.gyro).all(|x| x.is_finite()),
+            "non-finite sensor frame from a finite plant: {frame:?}"
+        );
+        let motors = [float(u)?, float(u)?, float(u)?, float(u)?];
+        if plant.step(motors).is_err() {
+            break;
+        }
+    }
     Ok(())
 }

@@ -6,11 +6,12 @@ use std::path::Path;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
+use swing_core::control::adaptive::AdaptiveSettings;
 use swing_core::control::px4::Px4Params;
 use swing_core::control::selection::{CheckBounds, SelectionSettings};
 use swing_core::control::{LqrSettings, MpcSettings};
 use swing_core::plant::{PayloadParams, PendulumModel, VehicleParams, WindParams};
-use swing_core::sim::{NoiseParams, Scenario, SetpointEntry};
+use swing_core::sim::{HilSettings, NoiseParams, Scenario, SetpointEntry};
 use swing_core::sysid::IdentifySettings;
 use swing_fuzz::targets::small_model;
 
@@ -119,6 +120,8 @@ fn main() {
         },
     );
     settings_seeds(11, "setpoint", &SetpointEntry::default());
+    settings_seeds(13, "hil", &HilSettings::default());
+    settings_seeds(14, "adaptive", &AdaptiveSettings::default());
     write(
         "settings",
         "step-check",
@@ -132,6 +135,7 @@ fn main() {
         "identify",
         "mpc",
         "simulator",
+        "hil",
     ] {
         for (i, len) in [16usize, 64, 256, 1024].into_iter().enumerate() {
             let mut buf = vec![0u8; len];
