@@ -250,7 +250,7 @@ def select_for_control(
     mpc_settings: Mapping[str, Any] | None = None,
     candidates: int = 20,
     input_lags: Sequence[float] = (0.0, 0.1),
-    vehicle_drag: Sequence[float] = (0.12,),
+    vehicle_drag: Sequence[float] = (0.12, 0.4),
     step: float = 2.0,
     bounds: Mapping[str, float] | None = None,
     **settings: Any,

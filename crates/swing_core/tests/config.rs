@@ -78,3 +78,24 @@ fn overshoot_is_the_excursion_beyond_the_new_setpoint_in_steps() {
     assert_eq!(excursion(3.0, 1.0, 1.0), 0.0);
     assert_eq!(overshoot(&[], 0.0, 1.0), f64::NEG_INFINITY);
 }
+
+#[test]
+fn default_selection_check_covers_the_drag_of_a_step_into_strong_wind() {
+    use swing_core::control::selection::SelectionSettings;
+    use swing_core::plant::VehicleParams;
+    // Quadratic drag ½ ρ C_Q w|w| linearised at airspeed w: ρ C_Q w / m per second. A 2 m/s
+    // step into a 2 m/s headwind with a 0.5 kg payload must be among the plants checked, or
+    // models that only hold light air pass and then cycle in flight.
+    let v = VehicleParams::default();
+    let airspeed = 4.0;
+    let needed = v.air_density * v.drag[0] * airspeed / (v.mass + 0.5);
+    let s = SelectionSettings::default();
+    let most = s.vehicle_drag.iter().copied().fold(0.0, f64::max);
+    assert!(most >= needed, "largest check drag {most} /s < {needed} /s");
+    assert!(
+        s.vehicle_drag.iter().any(|k| *k < needed / 2.0),
+        "{:?}",
+        s.vehicle_drag
+    );
+    s.validate().unwrap();
+}
