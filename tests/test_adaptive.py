@@ -163,20 +163,65 @@ def test_adaptive_timing_reports_tick_and_resynthesis():
         _core.adaptive_timing(model, n_ticks=0)
 
 
-def test_payload_change_experiment_is_listed_and_runs_a_case(tmp_path):
+@pytest.mark.parametrize("case", ["pickup", "winch"])
+def test_payload_change_adaptive_mpc_matches_the_oracle(case, tmp_path):
+    """The issue's acceptance on the cases where the fixed MPC is far from the oracle: the
+    adaptive MPC's swing excess IAE after the change is within 1.5x the oracle's and below
+    half the fixed MPC's, and it re-adopted a model before the scored step ends."""
     from swingrt.experiments import list_experiments, load_experiment, run_experiment
 
     assert "payload-change" in list_experiments()
     exp = load_experiment("payload-change")
     assert exp.controllers == ["pid", "lqr", "mpc", "mpc_adaptive", "mpc_oracle"]
     exp = copy.deepcopy(exp)
-    exp.cases = {"winch": exp.cases["winch"]}
-    rows = run_experiment(exp, tmp_path, quiet=True)
-    assert [r["controller"] for r in rows] == exp.controllers
-    assert all(np.isfinite(float(r["peak_swing_deg"])) for r in rows)
+    exp.cases = {case: exp.cases[case]}
+    exp.controllers = ["mpc", "mpc_adaptive", "mpc_oracle"]
+    rows = {r["controller"]: r for r in run_experiment(exp, tmp_path, quiet=True)}
+    excess = {c: float(r["swing_excess_iae_deg_s"]) for c, r in rows.items()}
+    assert excess["mpc"] > 3.0 * excess["mpc_oracle"], excess  # the change matters
+    assert excess["mpc_adaptive"] <= 1.5 * excess["mpc_oracle"], excess
+    assert excess["mpc_adaptive"] <= 0.5 * excess["mpc"], excess
     md = (tmp_path / "metrics.md").read_text(encoding="utf-8")
-    assert "adaptive MPC, change at 8.00 s" in md
-    assert (tmp_path / "winch__oracle_model.json").is_file()
+    assert "model re-adopted after" in md
+    assert (tmp_path / f"{case}__oracle_model.json").is_file()
+
+
+def test_twin_path_in_ten_minutes_of_noisy_hover_changes_nothing(identified):
+    """With the twin path on, a hover with swing-sensor noise and no payload change neither
+    probes nor re-identifies: noise gives no confident length, the thrust no mass step."""
+    from swingrt.experiments.runner import cases, load_experiment, training_scenario
+
+    exp = load_experiment("payload-change")
+    train = training_scenario(exp, dict(cases(exp))["vehicle-mass"], 0)
+    noisy = {
+        "duration": 600.0,
+        "noise": {"swing_std": 0.002},
+        "payload": {"mass": 0.3, "length": 0.5},
+    }
+    hover = _core.Simulator(resolve(noisy, default="hover"))
+    hover.attach_adaptive_mpc(
+        identified,
+        None,
+        {"probe_amplitude": 0.4, "twin": {"enabled": True}},
+        0.0,
+        identified.dt,
+        train,
+        (0.3, 0.5, 0.952),
+    )
+    hover.run_to_end()
+    assert hover.fallback_reason is None
+    assert hover.controller_events() == []
+
+
+def test_twin_path_needs_the_twin():
+    model = _core.pendulum_model(delays=4, axes=1)
+    with pytest.raises(ConfigError, match="twin"):
+        _core.AdaptiveMpc(model, None, {"twin": {"enabled": True}})
+    sim = _core.Simulator(resolve({}, default="hover"))
+    with pytest.raises(ConfigError, match="twin"):
+        sim.attach_adaptive_mpc(model, None, None, 0.0, model.dt, None, (0.3, 0.5, 0.952))
+    with pytest.raises(ConfigError, match="twin.duration"):
+        _core.check_settings("adaptive", {"twin": {"duration": 1.0}})
 
 
 def test_an_oracle_controller_needs_its_case_overrides():

@@ -4,17 +4,22 @@
 //! (m_p 0.2 kg, l 1 m) at 0.03 s in 20 delay coordinates (the default q), seed 7, default
 //! MPC and adaptive settings; the plant is the model itself under ±2 m/s velocity steps, so
 //! every sample is excited and enters the estimate. After criterion's runs the median / p99
-//! are printed from `control::adaptive::adaptive_timing`.
+//! are printed from `control::adaptive::adaptive_timing`. The twin path's re-identification
+//! (`control::twin`: a 60 s twin training flight with 0.3 kg on 1.5 m and a DMDc fit of
+//! the same form, q = 20) is timed too; its MPC design and check cost what the
+//! re-synthesis does.
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use swing_core::control::adaptive::adaptive_timing;
+use swing_core::control::twin::Twin;
 use swing_core::control::{
     AdaptiveMpc, AdaptiveSettings, AxisState, LinearPlant, MpcSettings, SwingController,
 };
 use swing_core::plant::PendulumModel;
+use swing_core::sim::Scenario;
 use swing_core::sysid::LinearModel;
 use swing_core::testing::pendulum_delay_model;
 
@@ -83,7 +88,31 @@ fn bench(c: &mut Criterion) {
         }
         b.iter(|| black_box(ctrl.synthesize_now()));
     });
+    let twin = Twin::new(
+        &Scenario::builtin("training").expect("scenario"),
+        60.0,
+        0.952,
+    )
+    .expect("twin");
+    let mut template = m.clone();
+    template.method = "dmdc".into();
+    template.offset = swing_core::sysid::Offset::Affine;
+    g.bench_function("twin_reidentify_60s_q20", |b| {
+        b.iter(|| black_box(twin.identify(&template, 0.3, 1.5).expect("twin model")));
+    });
     g.finish();
+    let mut twin_ms: Vec<f64> = (0..10)
+        .map(|_| {
+            let t0 = Instant::now();
+            black_box(twin.identify(&template, 0.3, 1.5).expect("twin model"));
+            t0.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    twin_ms.sort_by(f64::total_cmp);
+    println!(
+        "twin re-identification (60 s flight + DMDc q = 20): median {:.1} ms, max {:.1} ms",
+        twin_ms[5], twin_ms[9]
+    );
     let (tick, build) = adaptive_timing(
         &m,
         &MpcSettings::default(),

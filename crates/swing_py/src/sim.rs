@@ -5,9 +5,11 @@ use std::sync::{Mutex, MutexGuard};
 
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
+use swing_core::control::adaptive::TwinPrior;
 use swing_core::control::lqr::{LqrController, LqrSettings};
 use swing_core::control::mpc::{MpcController, MpcSettings};
 use swing_core::control::px4::AxisSetpoint;
+use swing_core::control::twin::Twin;
 use swing_core::control::{AdaptiveMpc, AdaptiveSettings};
 use swing_core::plant::PendulumModel;
 use swing_core::sim::{Scenario, Simulator, Trace, FLIGHT_COLUMNS, STATE_KEYS, TRACE_COLUMNS};
@@ -307,7 +309,11 @@ impl PySimulator {
 
     /// Fly the adaptive MPC (`control::adaptive`) designed on `model` with MPC `settings`
     /// and `adaptive` settings from `engage_at` [s]: the model follows the payload online.
-    #[pyo3(signature = (model, settings, adaptive, engage_at, budget))]
+    /// `twin` (the training flight's scenario) with `twin_payload` = (payload mass [kg],
+    /// cable length [m], vehicle mass [kg]) the model was identified for enables the twin
+    /// path (`adaptive.twin.enabled`).
+    #[pyo3(signature = (model, settings, adaptive, engage_at, budget, twin=None, twin_payload=None))]
+    #[allow(clippy::too_many_arguments)]
     fn attach_adaptive_mpc(
         &mut self,
         model: &PyLinearModel,
@@ -315,10 +321,31 @@ impl PySimulator {
         adaptive: Option<&Bound<'_, PyAny>>,
         engage_at: f64,
         budget: f64,
+        twin: Option<&PyScenario>,
+        twin_payload: Option<(f64, f64, f64)>,
     ) -> PyResult<()> {
         let settings: MpcSettings = crate::convert::settings(settings, "mpc")?;
         let adaptive: AdaptiveSettings = crate::convert::settings(adaptive, "adaptive")?;
-        let ctrl = AdaptiveMpc::new(&model.inner, settings, adaptive).map_err(to_py)?;
+        let prior = match (twin, twin_payload) {
+            (Some(sc), Some((payload_mass, length, vehicle_mass))) => {
+                let twin = Twin::new(&sc.inner, adaptive.twin.duration, vehicle_mass)
+                    .map_err(|e| to_py(ConfigError::new("twin", e)))?;
+                Some(TwinPrior {
+                    twin,
+                    payload_mass,
+                    length,
+                })
+            }
+            (None, None) => None,
+            _ => {
+                return Err(to_py(ConfigError::new(
+                    "twin_payload",
+                    "twin and twin_payload go together",
+                )))
+            }
+        };
+        let ctrl =
+            AdaptiveMpc::with_twin(&model.inner, settings, adaptive, prior).map_err(to_py)?;
         self.sim_mut()
             .attach_controller(Box::new(ctrl), engage_at, budget)
             .map_err(to_py)

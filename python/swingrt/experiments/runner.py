@@ -273,9 +273,13 @@ def simulate_controller(
     adaptive_settings: dict[str, Any] | None = None,
     engage_at: float = 0.0,
     prediction_at: float | None = None,
+    twin: Scenario | None = None,
 ) -> tuple[Trace, dict[str, Any]]:
     """Fly one scenario with a controller of :data:`CONTROLLERS` on the given axes
-    (``mpc_oracle`` is the MPC on whatever ``model`` it is given).
+    (``mpc_oracle`` is the MPC on whatever ``model`` it is given). ``twin`` (the training
+    flight's scenario) lets ``mpc_adaptive`` re-identify on the vehicle's twin for the
+    payload it measures, starting from the white-box ``lqr_params`` (``m_q``, ``m_p``,
+    ``l``) of the training flight, when ``adaptive_settings`` enable it.
 
     Returns the trace and extras: fallback reason, tick timings, the controller's events
     (time [s], what, value) and (``prediction_at``) the MPC's predicted outputs from the
@@ -291,8 +295,26 @@ def simulate_controller(
             raise ConfigError(f"{controller} needs an identified model", field="model")
         # The budget of one tick is its period.
         if controller == "mpc_adaptive":
+            use_twin = bool((adaptive_settings or {}).get("twin", {}).get("enabled", False))
+            if use_twin and (twin is None or lqr_params is None):
+                raise ConfigError(
+                    "adaptive.twin.enabled needs the training scenario and the white-box "
+                    "estimate of the training payload",
+                    field="adaptive.twin",
+                )
+            prior = (
+                (float(lqr_params["m_p"]), float(lqr_params["l"]), float(lqr_params["m_q"]))
+                if use_twin and lqr_params is not None
+                else None
+            )
             sim.attach_adaptive_mpc(
-                model, mpc_settings or None, adaptive_settings or None, engage_at, model.dt
+                model,
+                mpc_settings or None,
+                adaptive_settings or None,
+                engage_at,
+                model.dt,
+                twin if use_twin else None,
+                prior,
             )
         else:
             sim.attach_mpc(model, mpc_settings or None, engage_at, model.dt)
@@ -394,6 +416,7 @@ def run_experiment(
                 lqr_settings=exp.lqr or None,
                 adaptive_settings=exp.adaptive or None,
                 prediction_at=step["t"] if exp.prediction_figure else None,
+                twin=train_sc,
             )
             if ctrl == "mpc_adaptive":
                 notes.append(f"{case}: {adaptation_note(ev_sc, extras['events'])}")
@@ -442,22 +465,31 @@ def run_experiment(
 
 
 def adaptation_note(scenario: Scenario, events: list[tuple[float, str, float]]) -> str:
-    """When the adaptive MPC detected the change and re-adopted a model, relative to the
-    scenario's first payload event (``adopted … s after the change``)."""
+    """When the adaptive MPC noticed the change (online detector, or the twin path's mass
+    step / new cable length) and re-adopted a model, relative to the scenario's first
+    payload event (``adopted … s after the change``)."""
     changes = scenario.to_dict().get("payload", {}).get("events", [])
     t_change = float(changes[0]["t"]) if changes else 0.0
-    first: dict[str, float] = {}
-    for t, what, _ in events:
+    first: dict[str, tuple[float, float]] = {}
+    for t, what, value in events:
         if t >= t_change:
-            first.setdefault(what, t)
+            first.setdefault(what, (t, value))
     rejected = sum(1 for t, w, _ in events if w == "rejected" and t >= t_change)
     parts = [f"adaptive MPC, change at {t_change:.2f} s:"]
-    if "detected" in first:
-        parts.append(f"detected after {first['detected'] - t_change:.2f} s")
+    noticed = [first[w][0] for w in ("detected", "mass_changed", "requested") if w in first]
+    if noticed:
+        parts.append(f"noticed after {min(noticed) - t_change:.2f} s")
     else:
-        parts.append("not detected")
+        parts.append("not noticed")
+    if "mass_changed" in first:
+        parts.append(f"(thrust: total mass {first['mass_changed'][1]:.3f} kg)")
+    lengths = [v for t, w, v in events if w == "requested" and t >= t_change and v > 0]
+    if lengths and "detected" not in first:
+        parts.append(
+            "twin re-identified for cable length(s) " + ", ".join(f"{v:.2f} m" for v in lengths)
+        )
     if "adopted" in first:
-        parts.append(f"model re-adopted after {first['adopted'] - t_change:.2f} s")
+        parts.append(f"model re-adopted after {first['adopted'][0] - t_change:.2f} s")
     else:
         parts.append("no model re-adopted")
     if rejected:

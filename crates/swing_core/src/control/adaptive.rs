@@ -47,11 +47,13 @@ use super::layout::{AxisLayout, Measured};
 use super::mpc::timing::TickTiming;
 use super::plant::LinearPlant;
 use super::selection::CheckBounds;
+use super::twin::{Twin, MIN_TWIN_SECONDS};
 use super::{
     AxisState, ControlError, ControllerEvent, MpcController, MpcSettings, SwingController, TickInfo,
 };
 use crate::config::{non_negative, positive, ConfigError};
 use crate::sysid::online::{model_from_factor, OnlineDmdc, OnlineSettings};
+use crate::sysid::payload::{PayloadTracker, TrackerSettings};
 use crate::sysid::{LinearModel, Offset};
 
 /// Where the re-synthesis runs.
@@ -100,6 +102,72 @@ pub struct AdaptiveSettings {
     /// replaced, which has flown [ticks] (0 = never); after three reverts adaptation stops
     /// for the flight.
     pub revert_window: usize,
+    /// Re-identification on the vehicle's twin from the payload measured in flight
+    /// ([`super::twin`]); off by default, and it needs a twin at construction.
+    pub twin: TwinSettings,
+}
+
+/// Settings of the twin path of the adaptive MPC: when the measured cable length departs
+/// from the model's, fly the twin with the measured payload and re-identify.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TwinSettings {
+    /// Use the twin (and not the online DMDc's refits) to re-identify.
+    pub enabled: bool,
+    /// Length of the twin's training flight [s].
+    pub duration: f64,
+    /// Relative change of the measured cable length that triggers a re-identification
+    /// [fraction].
+    pub length_change: f64,
+    /// Largest relative standard error of a length estimate acted upon [fraction] (it must
+    /// also depart from the model's by [`LENGTH_SIGNIFICANCE`] standard errors).
+    pub confidence: f64,
+    /// Change of the measured total mass that starts probing until the length is confirmed
+    /// [kg] (a pick-up in hover leaves the payload still, and a still pendulum shows no
+    /// length); probing needs `probe_amplitude` > 0.
+    pub mass_change: f64,
+    /// Longest probing after a mass change [s].
+    pub probe_seconds: f64,
+    /// Forgetting factor per tick of the length estimate, (0, 1).
+    pub forgetting: f64,
+}
+
+impl Default for TwinSettings {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            duration: 60.0,
+            length_change: 0.15,
+            confidence: 0.4,
+            mass_change: 0.05,
+            probe_seconds: 3.0,
+            forgetting: 0.99,
+        }
+    }
+}
+
+impl TwinSettings {
+    /// Check every field; the error names the first bad one.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        crate::config::in_range("duration", self.duration, MIN_TWIN_SECONDS, 3600.0)?;
+        positive("length_change", self.length_change)?;
+        positive("confidence", self.confidence)?;
+        positive("mass_change", self.mass_change)?;
+        non_negative("probe_seconds", self.probe_seconds)?;
+        crate::config::in_range("forgetting", self.forgetting, 0.5, 0.9999)?;
+        Ok(())
+    }
+}
+
+/// The twin and the payload the initial model was identified with.
+#[derive(Clone, Debug)]
+pub struct TwinPrior {
+    /// The vehicle's twin.
+    pub twin: Twin,
+    /// Payload mass of the initial model [kg].
+    pub payload_mass: f64,
+    /// Cable length of the initial model [m].
+    pub length: f64,
 }
 
 impl Default for AdaptiveSettings {
@@ -117,6 +185,7 @@ impl Default for AdaptiveSettings {
             probe_amplitude: 0.0,
             probe_hold: 5,
             revert_window: 200,
+            twin: TwinSettings::default(),
         }
     }
 }
@@ -154,6 +223,7 @@ impl AdaptiveSettings {
         if self.probe_hold == 0 {
             return Err(ConfigError::new("probe_hold", "must be at least 1 tick"));
         }
+        self.twin.validate().map_err(|e| e.within("twin"))?;
         Ok(())
     }
 }
@@ -162,6 +232,8 @@ impl AdaptiveSettings {
 struct Job {
     factor: Vec<f64>,
     weight: f64,
+    /// Fly the twin with this payload (mass [kg], length [m]) instead of using the factor.
+    twin: Option<[f64; 2]>,
 }
 
 /// A candidate that passed the check (boxed so that the swap moves pointers only).
@@ -198,6 +270,7 @@ struct Synthesizer {
     template: LinearModel,
     mpc: MpcSettings,
     settings: AdaptiveSettings,
+    twin: Option<Twin>,
 }
 
 impl Synthesizer {
@@ -212,8 +285,13 @@ impl Synthesizer {
         let full = t.m() + usize::from(t.offset == Offset::Affine) + t.n() * t.delays;
         // Rank 0 marks a full-rank model.
         let rank = if t.rank == 0 { full } else { t.rank.min(full) };
-        let model =
-            model_from_factor(&job.factor, job.weight, rank, t).map_err(|e| e.to_string())?;
+        let model = match (job.twin, &self.twin) {
+            (Some([mass, length]), Some(twin)) => twin.identify(t, mass, length)?,
+            (Some(_), None) => return Err("no twin to fly".into()),
+            (None, _) => {
+                model_from_factor(&job.factor, job.weight, rank, t).map_err(|e| e.to_string())?
+            }
+        };
         let rho = model.spectral_radius().map_err(|e| e.to_string())?;
         // NaN is refused too.
         if rho.is_nan() || rho > self.settings.max_spectral_radius {
@@ -291,6 +369,17 @@ enum Synthesis {
 /// failing to capture is left to the controller that has flown.
 pub const MAX_REVERTS: usize = 3;
 
+/// Smallest payload mass the twin re-identifies for [kg]: below it the swing carries no
+/// dynamics to identify (the payload is gone).
+pub const MIN_PAYLOAD_MASS: f64 = 0.02;
+
+/// Standard errors by which a measured length must depart from the model's to act on it.
+pub const LENGTH_SIGNIFICANCE: f64 = 3.0;
+
+/// Spread of the total-mass estimate over the settle window below which it counts as
+/// settled [kg].
+pub const MASS_SETTLED_KG: f64 = 0.01;
+
 /// Most adaptation events kept (the log is preallocated; later events are counted only).
 pub const MAX_EVENTS: usize = 256;
 
@@ -329,6 +418,28 @@ pub struct AdaptiveMpc {
     rejections: usize,
     last_rejection: [u8; 160],
     last_rejection_len: usize,
+    tracker: PayloadTracker,
+    twin: Option<TwinState>,
+}
+
+/// The twin path's state on the tick side.
+#[derive(Clone, Copy, Debug)]
+struct TwinState {
+    settings_length_change: f64,
+    confidence: f64,
+    mass_change: f64,
+    probe_ticks: u64,
+    vehicle_mass: f64,
+    /// Payload (mass [kg], length [m]) the active model was identified for.
+    reference: [f64; 2],
+    /// Measured total mass when the active model was adopted (NaN until measured).
+    mass_at_reference: f64,
+    /// Payload of the candidate in the synthesis.
+    pending: [f64; 2],
+    /// Probe until this tick (0 = not probing).
+    probe_until: u64,
+    /// No new twin request before this tick (after a rejection).
+    retry_at: u64,
 }
 
 impl std::fmt::Debug for AdaptiveMpc {
@@ -349,7 +460,47 @@ impl AdaptiveMpc {
         mpc: MpcSettings,
         settings: AdaptiveSettings,
     ) -> Result<Self, ControlError> {
+        Self::with_twin(model, mpc, settings, None)
+    }
+
+    /// As [`Self::new`], with the vehicle's twin for re-identification from the measured
+    /// payload (used when `settings.twin.enabled`; required then).
+    pub fn with_twin(
+        model: &LinearModel,
+        mpc: MpcSettings,
+        settings: AdaptiveSettings,
+        prior: Option<TwinPrior>,
+    ) -> Result<Self, ControlError> {
         settings.validate()?;
+        if settings.twin.enabled && prior.is_none() {
+            return Err(ControlError::Config(ConfigError::new(
+                "twin.enabled",
+                "needs the vehicle's twin (the training flight's scenario)",
+            )));
+        }
+        let twin_state = prior
+            .as_ref()
+            .filter(|_| settings.twin.enabled)
+            .map(|p| TwinState {
+                settings_length_change: settings.twin.length_change,
+                confidence: settings.twin.confidence,
+                mass_change: settings.twin.mass_change,
+                probe_ticks: (settings.twin.probe_seconds / model.dt).round() as u64,
+                vehicle_mass: p.twin.vehicle_mass(),
+                reference: [p.payload_mass, p.length],
+                mass_at_reference: f64::NAN,
+                pending: [f64::NAN; 2],
+                probe_until: 0,
+                retry_at: 0,
+            });
+        let tracker = PayloadTracker::new(
+            model.m(),
+            model.dt,
+            TrackerSettings {
+                forgetting: settings.twin.forgetting,
+                ..TrackerSettings::default()
+            },
+        );
         let active = Box::new(MpcController::new(model, mpc.clone())?);
         let online = OnlineDmdc::for_model(model, settings.online.clone())?;
         let layout = AxisLayout::from_model(model)?;
@@ -367,12 +518,14 @@ impl AdaptiveMpc {
             Box::new(Job {
                 factor: vec![0.0; cols * cols],
                 weight: 0.0,
+                twin: None,
             })
         };
         let synth = Arc::new(Synthesizer {
             template: model.clone(),
             mpc,
             settings: settings.clone(),
+            twin: prior.map(|p| p.twin),
         });
         let synthesis = match settings.synthesis {
             SynthesisMode::Deferred => Synthesis::Deferred {
@@ -437,6 +590,8 @@ impl AdaptiveMpc {
             rejections: 0,
             last_rejection: [0; 160],
             last_rejection_len: 0,
+            tracker,
+            twin: twin_state,
         })
     }
 
@@ -477,6 +632,7 @@ impl AdaptiveMpc {
         let job = Box::new(Job {
             factor: self.online.factor()[..cols * cols].to_vec(),
             weight: self.online.weight(),
+            twin: None,
         });
         self.synth.run(job).result.map(|c| *c.model)
     }
@@ -520,9 +676,15 @@ impl AdaptiveMpc {
             return Ok(());
         };
         self.busy = false;
+        let from_twin = outcome.job.twin.is_some();
         self.spare = Some(outcome.job);
         match outcome.result {
             Ok(Candidate { mut mpc, model }) => {
+                if let (true, Some(tw)) = (from_twin, self.twin.as_mut()) {
+                    tw.reference = tw.pending;
+                    tw.mass_at_reference = self.tracker.total_mass().unwrap_or(f64::NAN);
+                    tw.probe_until = 0;
+                }
                 mpc.take_over(&self.active, self.keep_disturbance)?;
                 self.online.adopt(&model)?;
                 let old_mpc = std::mem::replace(&mut self.active, mpc);
@@ -548,6 +710,9 @@ impl AdaptiveMpc {
                 self.last_rejection[..len].copy_from_slice(&bytes[..len]);
                 self.last_rejection_len = len;
                 self.retry_after = self.online.accepted() + self.retry_samples;
+                if let (true, Some(tw)) = (from_twin, self.twin.as_mut()) {
+                    tw.retry_at = self.tick + self.retry_samples;
+                }
                 // The value says which test refused it: the check's worst miss ratio, or
                 // NaN when the model itself was refused (unstable, no design).
                 let miss = outcome
@@ -578,23 +743,82 @@ impl AdaptiveMpc {
         Ok(())
     }
 
-    fn maybe_request(&mut self) {
-        let o = &self.online;
-        let due = !self.busy
-            && !self.suspended
-            && o.fired()
-            && o.excited()
-            && o.accepted_since_fire() >= self.min_new_samples
-            && o.accepted() >= self.retry_after;
-        if !due {
+    /// Twin path: probe after a mass change until the length is confirmed; request a
+    /// re-identification when the measured length departs from the model's.
+    fn maybe_request_twin(&mut self) {
+        let Some(mut tw) = self.twin else {
             return;
-        }
+        };
+        let request = self.twin_decision(&mut tw);
+        self.twin = Some(tw);
+        let Some(payload) = request else {
+            return;
+        };
         let Some(mut job) = self.spare.take() else {
             return;
         };
-        job.factor.copy_from_slice(self.online.factor());
-        job.weight = self.online.weight();
-        let sent = match &mut self.synthesis {
+        job.twin = Some(payload);
+        if self.send(job) {
+            if let Some(tw) = self.twin.as_mut() {
+                tw.pending = payload;
+            }
+            self.busy = true;
+            self.log("requested", payload[1]);
+        }
+    }
+
+    /// The twin path's bookkeeping of one tick; the payload (mass, length) to fly the twin
+    /// with, when a re-identification is due.
+    fn twin_decision(&mut self, tw: &mut TwinState) -> Option<[f64; 2]> {
+        let mass = self.tracker.total_mass();
+        if let Some(m) = mass {
+            if tw.mass_at_reference.is_nan() {
+                tw.mass_at_reference = m;
+            } else if (m - tw.mass_at_reference).abs() > tw.mass_change
+                && tw.probe_until == 0
+                && !self.busy
+            {
+                tw.probe_until = self.tick + tw.probe_ticks;
+                // The old swing says nothing about the new payload.
+                self.tracker.restart();
+                tw.mass_at_reference = m;
+                self.log("mass_changed", m);
+                return None;
+            }
+        }
+        let (length, rel) = self.tracker.length()?;
+        if rel > tw.confidence {
+            return None;
+        }
+        tw.probe_until = 0; // the length is confirmed
+        if self.busy || self.suspended || self.tick < tw.retry_at {
+            return None;
+        }
+        // Act on a length that departs from the model's by more than the tolerance and by
+        // more than LENGTH_SIGNIFICANCE standard errors: in a transient the residual of the
+        // pendulum equation (sensor lag, large angles) widens the error bar long after the
+        // estimate itself has converged.
+        let departure = (length - tw.reference[1]).abs();
+        if departure <= tw.settings_length_change * tw.reference[1]
+            || departure <= LENGTH_SIGNIFICANCE * rel * length
+        {
+            return None;
+        }
+        // A new length is a new payload (or the same one winched): the mass change since
+        // the model's payload is the payload's. A mass change at an unchanged length is
+        // taken as the vehicle's, which PX4's hover thrust absorbs.
+        let payload_mass = match mass {
+            // Wait until a pick-up's thrust step has settled in the estimate.
+            Some(_) if !self.tracker.mass_settled(MASS_SETTLED_KG) => return None,
+            Some(m) => m - tw.vehicle_mass,
+            None => tw.reference[0],
+        };
+        (payload_mass >= MIN_PAYLOAD_MASS).then_some([payload_mass, length])
+    }
+
+    /// Hand a job to the synthesis; false (job kept) when it cannot take it now.
+    fn send(&mut self, job: Box<Job>) -> bool {
+        match &mut self.synthesis {
             Synthesis::Thread { tx: Some(tx), .. } => match tx.try_send(ToWorker::Build(job)) {
                 Ok(()) => true,
                 Err(TrySendError::Full(msg) | TrySendError::Disconnected(msg)) => {
@@ -612,8 +836,27 @@ impl AdaptiveMpc {
                 *pending = Some(job);
                 true
             }
+        }
+    }
+
+    fn maybe_request(&mut self) {
+        let o = &self.online;
+        let due = !self.busy
+            && !self.suspended
+            && o.fired()
+            && o.excited()
+            && o.accepted_since_fire() >= self.min_new_samples
+            && o.accepted() >= self.retry_after;
+        if !due {
+            return;
+        }
+        let Some(mut job) = self.spare.take() else {
+            return;
         };
-        if sent {
+        job.factor.copy_from_slice(self.online.factor());
+        job.weight = self.online.weight();
+        job.twin = None;
+        if self.send(job) {
             self.busy = true;
             self.log("requested", self.online.weight());
         }
@@ -664,7 +907,7 @@ impl SwingController for AdaptiveMpc {
         self.tick += 1;
         if self.have_last && fill_frame(&self.sources, state, &mut self.x) {
             let st = self.online.update(&self.x, &self.u_last[..self.m])?;
-            if st.fired {
+            if st.fired && self.twin.is_none() {
                 self.log("detected", st.statistic);
                 let recent = self.tick - self.swapped_at <= self.revert_window;
                 if self.previous.is_some() && recent {
@@ -672,9 +915,14 @@ impl SwingController for AdaptiveMpc {
                 }
             }
         }
+        self.tracker.update(state);
         self.poll()?;
         let info = self.active.step(state, vel_ref, acc_out)?;
-        if self.probe_amplitude > 0.0 && self.online.fired() {
+        let probing = match &self.twin {
+            Some(tw) => tw.probe_until > self.tick,
+            None => self.online.fired(),
+        };
+        if self.probe_amplitude > 0.0 && probing {
             if self.tick % self.probe_hold == 0 {
                 // xorshift64: a fixed-seed pseudo-random sign per hold.
                 let mut x = self.probe_state;
@@ -690,12 +938,20 @@ impl SwingController for AdaptiveMpc {
         }
         self.u_last[..self.m].copy_from_slice(acc_out);
         self.have_last = true;
-        self.maybe_request();
+        if self.twin.is_some() {
+            self.maybe_request_twin();
+        } else {
+            self.maybe_request();
+        }
         Ok(info)
     }
 
     fn prediction(&mut self) -> Option<Vec<f64>> {
         self.active.prediction()
+    }
+
+    fn observe_vertical(&mut self, thrust_vertical: f64, vd: f64) {
+        self.tracker.update_vertical(thrust_vertical, vd);
     }
 
     fn between_ticks(&mut self) {

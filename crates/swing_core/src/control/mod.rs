@@ -18,6 +18,7 @@ pub mod mpc;
 pub mod plant;
 pub mod riccati;
 pub mod selection;
+pub mod twin;
 
 pub use adaptive::{AdaptiveMpc, AdaptiveSettings, SynthesisMode};
 pub use check::{mpc_step_check, step_check_with, StepCheck, StepCheckSettings};
@@ -166,6 +167,10 @@ pub trait SwingController: Send {
     /// Work that may run between ticks, off the timed tick path (e.g. a deferred model
     /// re-synthesis in simulation). Runners call it after each tick; the default does nothing.
     fn between_ticks(&mut self) {}
+    /// The vertical channel of the last measurement: rotor thrust projected on the vertical
+    /// [N] and the down velocity [m/s] (payload mass estimates); called before
+    /// [`SwingController::step`] where the runner knows them. The default ignores them.
+    fn observe_vertical(&mut self, _thrust_vertical: f64, _vd: f64) {}
     /// Events so far (see [`ControllerEvent`]); empty for controllers without any. Not for
     /// the real-time path.
     fn events(&self) -> Vec<ControllerEvent> {

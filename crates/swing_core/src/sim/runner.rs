@@ -474,8 +474,18 @@ impl Simulator {
             pos: &self.meas_pos,
             vel: &self.meas_vel,
             px4: &self.sc.controller,
+            thrust_vertical: self.thrust_vertical(),
         };
         self.supervisor.tick(&inputs, &mut self.sp, &mut self.fc);
+    }
+
+    /// Rotor thrust projected on the vertical (up) [N]: the thrust acts along −body z, whose
+    /// vertical part is the (3, 3) entry of the attitude's rotation, 1 − 2(x² + y²).
+    fn thrust_vertical(&self) -> f64 {
+        let q = &self.state.att;
+        let n2 = q.norm_squared();
+        let r33 = 1.0 - 2.0 * (q.i * q.i + q.j * q.j) / n2;
+        self.state.thrust.sum() * r33
     }
 
     fn check_finite(&self) -> Result<(), SimError> {

@@ -42,6 +42,8 @@ pub(crate) struct TickInputs<'a> {
     pub vel: &'a Vector3<f64>,
     /// PX4 parameters (position gains and limits, velocity P gains for the hand-back).
     pub px4: &'a Px4Params,
+    /// Rotor thrust projected on the vertical (up) [N].
+    pub thrust_vertical: f64,
 }
 
 /// The swing controller's supervisor (see module docs); without a controller it does nothing.
@@ -199,6 +201,7 @@ impl ControllerSupervisor {
             a.started = true;
             a.t_start = t;
         }
+        a.ctrl.observe_vertical(inp.thrust_vertical, inp.vel[2]);
         let mut out = [0.0; 2];
         let t0 = Instant::now();
         let res = a

@@ -11,6 +11,7 @@ pub mod havokc;
 pub mod metrics;
 pub mod model;
 pub mod online;
+pub mod payload;
 pub mod pipeline;
 pub mod search;
 pub mod settings;
