@@ -5,9 +5,9 @@
 //! MPC and adaptive settings; the plant is the model itself under ±2 m/s velocity steps, so
 //! every sample is excited and enters the estimate. After criterion's runs the median / p99
 //! are printed from `control::adaptive::adaptive_timing`. The twin path's re-identification
-//! (`control::twin`: a 60 s twin training flight with 0.3 kg on 1.5 m and a DMDc fit of
-//! the same form, q = 20) is timed too; its MPC design and check cost what the
-//! re-synthesis does.
+//! (`control::twin`: a twin training flight with 0.3 kg on 1.5 m, then DMDc of the same
+//! form, or the default rank search at the model's q = 20 with the control-relevant
+//! selection) is timed too; the MPC design of the swap costs what the re-synthesis does.
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -88,31 +88,43 @@ fn bench(c: &mut Criterion) {
         }
         b.iter(|| black_box(ctrl.synthesize_now()));
     });
-    let twin = Twin::new(
-        &Scenario::builtin("training").expect("scenario"),
-        60.0,
-        0.952,
-    )
-    .expect("twin");
+    let training = Scenario::builtin("training").expect("scenario");
+    let fixed = Twin::new(&training, 60.0, 0.952, false).expect("twin");
+    let searched = Twin::new(&training, 120.0, 0.952, true).expect("twin");
     let mut template = m.clone();
     template.method = "dmdc".into();
     template.offset = swing_core::sysid::Offset::Affine;
-    g.bench_function("twin_reidentify_60s_q20", |b| {
-        b.iter(|| black_box(twin.identify(&template, 0.3, 1.5).expect("twin model")));
+    let mpc = MpcSettings::default();
+    g.bench_function("twin_reidentify_search_120s_q20", |b| {
+        b.iter(|| {
+            black_box(
+                searched
+                    .identify(&template, 0.3, 1.5, &mpc)
+                    .expect("twin model"),
+            )
+        });
     });
     g.finish();
-    let mut twin_ms: Vec<f64> = (0..10)
-        .map(|_| {
-            let t0 = Instant::now();
-            black_box(twin.identify(&template, 0.3, 1.5).expect("twin model"));
-            t0.elapsed().as_secs_f64() * 1e3
-        })
-        .collect();
-    twin_ms.sort_by(f64::total_cmp);
-    println!(
-        "twin re-identification (60 s flight + DMDc q = 20): median {:.1} ms, max {:.1} ms",
-        twin_ms[5], twin_ms[9]
-    );
+    for (label, twin) in [
+        ("60 s flight, DMDc at the model's q and p", &fixed),
+        ("120 s flight, rank search at q = 20 + selection", &searched),
+    ] {
+        let mut ms: Vec<f64> = (0..10)
+            .map(|_| {
+                let t0 = Instant::now();
+                black_box(
+                    twin.identify(&template, 0.3, 1.5, &mpc)
+                        .expect("twin model"),
+                );
+                t0.elapsed().as_secs_f64() * 1e3
+            })
+            .collect();
+        ms.sort_by(f64::total_cmp);
+        println!(
+            "twin re-identification ({label}): median {:.1} ms, max {:.1} ms",
+            ms[5], ms[9]
+        );
+    }
     let (tick, build) = adaptive_timing(
         &m,
         &MpcSettings::default(),

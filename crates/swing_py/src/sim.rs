@@ -328,8 +328,13 @@ impl PySimulator {
         let adaptive: AdaptiveSettings = crate::convert::settings(adaptive, "adaptive")?;
         let prior = match (twin, twin_payload) {
             (Some(sc), Some((payload_mass, length, vehicle_mass))) => {
-                let twin = Twin::new(&sc.inner, adaptive.twin.duration, vehicle_mass)
-                    .map_err(|e| to_py(ConfigError::new("twin", e)))?;
+                let twin = Twin::new(
+                    &sc.inner,
+                    adaptive.twin.duration,
+                    vehicle_mass,
+                    adaptive.twin.search,
+                )
+                .map_err(|e| to_py(ConfigError::new("twin", e)))?;
                 Some(TwinPrior {
                     twin,
                     payload_mass,

@@ -116,6 +116,9 @@ pub struct TwinSettings {
     pub enabled: bool,
     /// Length of the twin's training flight [s].
     pub duration: f64,
+    /// Search the rank at the model's delays and select for control, as the model before
+    /// the flight was (false: keep the model's rank).
+    pub search: bool,
     /// Relative change of the measured cable length that triggers a re-identification
     /// [fraction].
     pub length_change: f64,
@@ -136,7 +139,8 @@ impl Default for TwinSettings {
     fn default() -> Self {
         Self {
             enabled: false,
-            duration: 60.0,
+            duration: 120.0,
+            search: true,
             length_change: 0.15,
             confidence: 0.4,
             mass_change: 0.05,
@@ -286,7 +290,7 @@ impl Synthesizer {
         // Rank 0 marks a full-rank model.
         let rank = if t.rank == 0 { full } else { t.rank.min(full) };
         let model = match (job.twin, &self.twin) {
-            (Some([mass, length]), Some(twin)) => twin.identify(t, mass, length)?,
+            (Some([mass, length]), Some(twin)) => twin.identify(t, mass, length, &self.mpc)?,
             (Some(_), None) => return Err("no twin to fly".into()),
             (None, _) => {
                 model_from_factor(&job.factor, job.weight, rank, t).map_err(|e| e.to_string())?
@@ -299,6 +303,22 @@ impl Synthesizer {
                 "spectral radius {rho:.4} above {}",
                 self.settings.max_spectral_radius
             ));
+        }
+        if job.twin.is_some()
+            && self
+                .twin
+                .as_ref()
+                .is_some_and(|_| self.settings.twin.search)
+        {
+            // The twin's selection has flown this candidate's MPC against the white-box of
+            // the measured payload, with drag and input lag: a stronger check than the
+            // candidate on itself.
+            return Ok(Candidate {
+                mpc: Box::new(
+                    MpcController::new(&model, self.mpc.clone()).map_err(|e| e.to_string())?,
+                ),
+                model: Box::new(model),
+            });
         }
         // The refit's constant term is the operating point of the recent data (drag at
         // cruise, a thrust offset). In the check (a plant started at rest) it would be a

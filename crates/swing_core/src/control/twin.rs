@@ -13,11 +13,15 @@
 //! vehicle the twin's fidelity (PX4's gains, the attitude loop's lag) bounds what this
 //! gives, which is why the candidate still goes through the closed-loop check.
 
+use super::selection::{select_for_control, SelectionSettings};
+use super::MpcSettings;
 use crate::plant::PayloadKind;
 use crate::sim::{Scenario, Simulator};
 use crate::sysid::dmdc::{self, DmdcSettings};
 use crate::sysid::hankel::Trajectory;
 use crate::sysid::pipeline::named;
+use crate::sysid::pipeline::{search, split, whitebox_model};
+use crate::sysid::settings::IdentifySettings;
 use crate::sysid::LinearModel;
 
 /// Shortest twin training flight [s]: below this a model of a 20-frame delay stack is
@@ -29,13 +33,24 @@ pub const MIN_TWIN_SECONDS: f64 = 20.0;
 pub struct Twin {
     scenario: Scenario,
     vehicle_mass: f64,
+    search: bool,
 }
+
+/// Share of the twin's flight held out to score the search's candidates.
+pub const TEST_FRACTION: f64 = 0.25;
 
 impl Twin {
     /// A twin that flies `training` (the scenario of the training flight, random steps and
     /// all) for `seconds` with the payload it is asked about; `vehicle_mass` [kg] is the
     /// vehicle's own mass as identified (the total mass less it is the payload's).
-    pub fn new(training: &Scenario, seconds: f64, vehicle_mass: f64) -> Result<Self, String> {
+    /// With `search`, the rank is searched at the template's delays and the candidate picked
+    /// by the control-relevant selection; without, the template's rank is kept.
+    pub fn new(
+        training: &Scenario,
+        seconds: f64,
+        vehicle_mass: f64,
+        search: bool,
+    ) -> Result<Self, String> {
         if !(seconds.is_finite() && seconds >= MIN_TWIN_SECONDS) {
             return Err(format!(
                 "twin duration must be at least {MIN_TWIN_SECONDS} s, not {seconds}"
@@ -51,6 +66,7 @@ impl Twin {
         Ok(Self {
             scenario,
             vehicle_mass,
+            search,
         })
     }
 
@@ -60,13 +76,14 @@ impl Twin {
     }
 
     /// Fly the twin with a single payload of `mass` [kg] on `length` [m] and fit a model of
-    /// `template`'s form (method DMDc, its delays, rank, offset, sample time, state and
-    /// input names).
+    /// `template`'s form (method DMDc, its delays, offset, sample time, state and input
+    /// names; its rank, or with `search` the rank selected for the MPC of `mpc`).
     pub fn identify(
         &self,
         template: &LinearModel,
         mass: f64,
         length: f64,
+        mpc: &MpcSettings,
     ) -> Result<LinearModel, String> {
         if template.method != "dmdc" {
             return Err(format!(
@@ -102,19 +119,61 @@ impl Twin {
         let traj =
             Trajectory::new(&x, states.len(), &u, inputs.len()).map_err(|e| e.to_string())?;
         debug_assert_eq!(n, m);
-        let full = template.n() * template.delays + template.m();
-        let rank = (template.rank != 0 && template.rank < full).then_some(template.rank);
-        let model = dmdc::fit(
-            &traj,
-            &DmdcSettings {
-                delays: template.delays,
-                rank,
-                offset: template.offset,
-                dt,
+        if !self.search {
+            let full = template.n() * template.delays + template.m();
+            let rank = (template.rank != 0 && template.rank < full).then_some(template.rank);
+            let model = dmdc::fit(
+                &traj,
+                &DmdcSettings {
+                    delays: template.delays,
+                    rank,
+                    offset: template.offset,
+                    dt,
+                },
+            )
+            .map_err(|e| e.to_string())?;
+            return named(model, &template.states, &template.inputs).map_err(|e| e.to_string());
+        }
+        // As the oracle is identified (search, then the control-relevant selection against
+        // the white-box of the flight), but at the template's q: the delay stack the
+        // flying controller hands over keeps its size.
+        let settings = IdentifySettings {
+            dt,
+            offset: template.offset,
+            search: true,
+            search_delays: Some(vec![template.delays]),
+            fine: Some([0, 7]),
+            test_span: self.scenario.duration * TEST_FRACTION,
+            cable_length: Some(length),
+            vehicle_mass: self.vehicle_mass,
+            ..IdentifySettings::default()
+        };
+        let (train, test) = split(&traj, &settings).map_err(|e| e.to_string())?;
+        let found = search(&train, &test, &settings).map_err(|e| e.to_string())?;
+        let plant = whitebox_model(&train, &template.states, &template.inputs, &settings, mass)
+            .map_err(|e| e.to_string())?;
+        let selection = select_for_control(
+            &train,
+            &test,
+            &template.states,
+            &template.inputs,
+            &settings,
+            &found,
+            &plant,
+            mpc,
+            &SelectionSettings {
+                plant_label: format!("twin whitebox (payload {mass:.3} kg on {length:.2} m)"),
+                ..SelectionSettings::default()
             },
         )
         .map_err(|e| e.to_string())?;
-        named(model, &template.states, &template.inputs).map_err(|e| e.to_string())
+        if !selection.passed {
+            return Err(format!(
+                "no rank at q = {} passed the closed-loop check on the twin's white-box",
+                template.delays
+            ));
+        }
+        Ok(selection.model)
     }
 }
 
@@ -208,9 +267,11 @@ mod tests {
     fn twin_models_swing_at_the_pendulum_frequency_of_the_length_asked() {
         let sc = Scenario::builtin("training").unwrap();
         let tpl = template(&sc);
-        let twin = Twin::new(&sc, 40.0, sc.vehicle.mass).unwrap();
+        let twin = Twin::new(&sc, 40.0, sc.vehicle.mass, false).unwrap();
         for &l in &[0.5, 2.0] {
-            let m = twin.identify(&tpl, 0.2, l).unwrap();
+            let m = twin
+                .identify(&tpl, 0.2, l, &MpcSettings::default())
+                .unwrap();
             assert_eq!((m.delays, m.states.clone()), (6, tpl.states.clone()));
             let w = swing_frequency(&m);
             // Under velocity control the vehicle is neither pinned nor free: the swing
@@ -227,13 +288,27 @@ mod tests {
     #[test]
     fn refuses_short_flights_and_bad_masses() {
         let sc = Scenario::builtin("training").unwrap();
-        assert!(Twin::new(&sc, 5.0, 1.0).is_err());
-        assert!(Twin::new(&sc, 60.0, -1.0).is_err());
-        let twin = Twin::new(&sc, 30.0, 0.952).unwrap();
+        assert!(Twin::new(&sc, 5.0, 1.0, false).is_err());
+        assert!(Twin::new(&sc, 60.0, -1.0, false).is_err());
+        let twin = Twin::new(&sc, 30.0, 0.952, false).unwrap();
         let tpl = template(&sc);
-        assert!(twin.identify(&tpl, -0.1, 1.0).is_err());
+        let mpc = MpcSettings::default();
+        assert!(twin.identify(&tpl, -0.1, 1.0, &mpc).is_err());
         let mut havok = tpl.clone();
         havok.method = "havokc".into();
-        assert!(twin.identify(&havok, 0.2, 1.0).is_err());
+        assert!(twin.identify(&havok, 0.2, 1.0, &mpc).is_err());
+    }
+
+    #[test]
+    fn twin_search_keeps_the_delays_and_passes_the_check() {
+        let sc = Scenario::builtin("training").unwrap();
+        let tpl = template(&sc);
+        let twin = Twin::new(&sc, 120.0, sc.vehicle.mass, true).unwrap();
+        let m = twin
+            .identify(&tpl, 0.3, 1.5, &MpcSettings::default())
+            .unwrap();
+        assert_eq!(m.delays, tpl.delays);
+        let check = &m.diagnostics.extra["control_check"];
+        assert_eq!(check["passed"], serde_json::json!(true), "{check}");
     }
 }
