@@ -220,6 +220,10 @@ def test_twin_path_needs_the_twin():
     sim = _core.Simulator(resolve({}, default="hover"))
     with pytest.raises(ConfigError, match="twin"):
         sim.attach_adaptive_mpc(model, None, None, 0.0, model.dt, None, (0.3, 0.5, 0.952))
+    train = resolve({}, default="training")
+    for bad in [(float("nan"), 0.5, 0.952), (0.3, -1.0, 0.952), (0.3, 0.5, float("inf"))]:
+        with pytest.raises(ConfigError, match="twin"):
+            sim.attach_adaptive_mpc(model, None, None, 0.0, model.dt, train, bad)
     with pytest.raises(ConfigError, match="twin.duration"):
         _core.check_settings("adaptive", {"twin": {"duration": 1.0}})
 

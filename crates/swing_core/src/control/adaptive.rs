@@ -498,6 +498,10 @@ impl AdaptiveMpc {
                 "needs the vehicle's twin (the training flight's scenario)",
             )));
         }
+        if let Some(p) = &prior {
+            positive("twin.payload_mass", p.payload_mass)?;
+            positive("twin.length", p.length)?;
+        }
         let twin_state = prior
             .as_ref()
             .filter(|_| settings.twin.enabled)
