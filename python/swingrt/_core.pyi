@@ -210,6 +210,7 @@ def select_for_control(
     plant: LinearModel,
     mpc: Any = None,
     selection: Any = None,
+    twin: Scenario | None = None,
 ) -> tuple[LinearModel, bool]: ...
 def evaluate(
     model: LinearModel,

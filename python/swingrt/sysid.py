@@ -248,11 +248,13 @@ def select_for_control(
     *,
     axes: str = "n",
     mpc_settings: Mapping[str, Any] | None = None,
-    candidates: int = 20,
+    candidates: int = 40,
     input_lags: Sequence[float] = (0.0, 0.1),
     vehicle_drag: Sequence[float] = (0.12, 0.4),
     step: float = 2.0,
     bounds: Mapping[str, float] | None = None,
+    twin: _core.Scenario | None = None,
+    twin_bounds: Mapping[str, float] | None = None,
     **settings: Any,
 ) -> SearchResult:
     """Pick from a search the model to fly an MPC on (control-relevant selection, see
@@ -262,7 +264,14 @@ def select_for_control(
     a ``step`` m/s step, hold; the first within ``bounds`` (fractions of the step:
     ``overshoot``, ``final_error``, ``hold_drift``) is taken, else the least violating. The
     outcome is in ``model.diagnostics['control_check']``. ``settings`` override the
-    search's identification settings."""
+    search's identification settings.
+
+    With ``twin`` (a scenario of the vehicle: its airframe and PX4 gains, e.g. the training
+    flight's), each candidate's MPC first flies the step on swingrt's nonlinear simulator of
+    that vehicle carrying the white-box payload, in still air, and must settle within
+    ``twin_bounds`` (``settle`` [s] after the step, ``final_error`` as a fraction of it)
+    before the linear plants are flown. Without a white-box (a model-only check) the twin is
+    not flown."""
     if result.search is None:
         raise ConfigError("result: not from a search (no candidates to check)", field="result")
     s = identify_settings(**{**result.settings, **settings})
@@ -273,11 +282,14 @@ def select_for_control(
         "vehicle_drag": list(vehicle_drag),
         "step": step,
         "bounds": dict(bounds or {}),
+        "twin_bounds": dict(twin_bounds or {}),
         "plant_label": label,
     }
+    if plant.method != "whitebox":
+        twin = None
     x, u, states, inputs = _prepare(data, axes, s)
     model, _passed = _core.select_for_control(
-        x, u, states, inputs, s, result.search, plant, mpc_settings, selection
+        x, u, states, inputs, s, result.search, plant, mpc_settings, selection, twin
     )
     return SearchResult(model=model, table=result.table, search=result.search, settings=s)
 

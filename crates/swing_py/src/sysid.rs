@@ -12,6 +12,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use swing_core::control::mpc::MpcSettings;
 use swing_core::control::selection::{self, SelectionSettings};
+use swing_core::control::twin::TwinPlant;
 use swing_core::plant::GRAVITY;
 use swing_core::sysid::metrics::rollout_nmae;
 use swing_core::sysid::pipeline::{self, candidate_row, ThrustLog};
@@ -21,6 +22,7 @@ use swing_core::Category;
 
 use crate::convert::{array1, array2, cols, data_err, from_py, to_py_object};
 use crate::errors::{raise, to_py};
+use crate::sim::PyScenario;
 
 /// A discrete linear model over delay coordinates (`swingrt-model/1`):
 /// z_{k+1} = A z_k + B (u_k − input_mean) + c, z_k = [x_k; …; x_{k−q+1}] (newest first).
@@ -418,9 +420,10 @@ fn identify<'py>(
 
 /// Control-relevant selection (see `swing_core::control::selection`): from `search` (run on
 /// `x`, `u` with `settings`), the model whose MPC (`mpc` settings) flies the white-box
-/// `plant` within bounds. Returns (model, passed).
+/// `plant` within bounds, first flying the vehicle's twin when `twin` (a scenario of the
+/// vehicle) is given. Returns (model, passed).
 #[pyfunction]
-#[pyo3(signature = (x, u, states, inputs, settings, search, plant, mpc=None, selection=None))]
+#[pyo3(signature = (x, u, states, inputs, settings, search, plant, mpc=None, selection=None, twin=None))]
 #[allow(clippy::too_many_arguments)]
 fn select_for_control<'py>(
     py: Python<'py>,
@@ -433,6 +436,7 @@ fn select_for_control<'py>(
     plant: &PyLinearModel,
     mpc: Option<&Bound<'py, PyAny>>,
     selection: Option<&Bound<'py, PyAny>>,
+    twin: Option<&PyScenario>,
 ) -> PyResult<(PyLinearModel, bool)> {
     let s: IdentifySettings = crate::convert::settings(settings, "")?;
     s.validate().map_err(to_py)?;
@@ -443,10 +447,23 @@ fn select_for_control<'py>(
     let (train, test) = pipeline::split(&traj, &s).map_err(to_py)?;
     let result = search.inner.clone();
     let plant = plant.inner.clone();
+    let twin = twin
+        .map(|sc| TwinPlant::new(&sc.inner, &plant, sel.step, inputs.len()))
+        .transpose()
+        .map_err(to_py)?;
     let picked = py
         .detach(|| {
             selection::select_for_control(
-                &train, &test, &states, &inputs, &s, &result, &plant, &mpc, &sel,
+                &train,
+                &test,
+                &states,
+                &inputs,
+                &s,
+                &result,
+                &plant,
+                &mpc,
+                &sel,
+                twin.as_ref(),
             )
         })
         .map_err(to_py)?;

@@ -76,6 +76,13 @@ def add_parser(sub) -> argparse.ArgumentParser:
     g.add_argument("--ulog-swing-offset", type=float, metavar="RAD", help="offset [rad] (0)")
     p.add_argument("--plots", metavar="DIR", help="write diagnostic plots into DIR")
     p.add_argument(
+        "--twin",
+        metavar="SCENARIO",
+        help="with --select control: also fly each candidate's MPC on swingrt's simulator of "
+        "this vehicle (a scenario TOML: airframe and PX4 gains; 'builtin' for the built-in "
+        "vehicle) carrying the white-box payload, and take only models that settle there",
+    )
+    p.add_argument(
         "--sweep",
         choices=("length", "dt", "noise"),
         help="also sweep training length (4.6.8), sample time (4.6.4) or sensor noise on/off "
@@ -108,17 +115,26 @@ def run(args) -> int:
     )
     with options_named():
         checked = sysid.identify_settings(**settings)
+    twin = None
+    if args.twin is not None:  # read before the search: a bad file fails at once
+        from swingrt.scenario import resolve
+
+        twin = resolve(None if args.twin == "builtin" else args.twin, default="step")
     data = load_flight(args.data, ulog_swing=_ulog_swing(args))
     result = None
     if args.search:
         search_opts = {k: v for k, v in checked.items() if k not in ("delays", "rank")}
         result = sysid.search(data, axes=args.axes, **search_opts)
         if checked["select"] == "control":
-            result = sysid.select_for_control(data, result, axes=args.axes)
+            result = sysid.select_for_control(data, result, axes=args.axes, twin=twin)
             cc = result.model.diagnostics["control_check"]
             verdict = "passed" if cc["passed"] else "no candidate passed; least violating kept"
             print(f"closed-loop check: {verdict} ({len(cc['checked'])} candidate(s) flown)")
             print(f"  checked on: {cc['plant']}")
+            if cc.get("twin"):
+                print(f"  and first on: {cc['twin']['plant']}")
+            elif twin is not None:
+                print("  twin not flown: no white-box payload to carry (model-only check)")
         model = result.model
     else:
         model = sysid.identify(data, axes=args.axes, **checked)

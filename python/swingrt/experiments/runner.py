@@ -345,10 +345,11 @@ def simulate_controller(
 
 
 def identify_case(
-    train: Trace, exp: Experiment, plots: Path | None = None
+    train: Trace, exp: Experiment, plots: Path | None = None, twin: Scenario | None = None
 ) -> tuple[Any, Any, dict[str, float]]:
     """DMDc (with search) for the MPC, white-box estimates for the LQR; with ``plots`` the
-    search's error-vs-q plot (the Pareto elbow) is written there."""
+    search's error-vs-q plot (the Pareto elbow) is written there. ``twin`` (the training
+    flight's scenario) adds the twin step flight to the control-relevant selection."""
     from swingrt.reports import plot_pareto
     from swingrt.sysid import identify, search, select_for_control
 
@@ -356,7 +357,9 @@ def identify_case(
     if opts.pop("search", True) and "delays" not in opts:
         result = search(train, axes=exp.axes, **opts)
         if "mpc" in exp.controllers and result.settings["select"] == "control":
-            result = select_for_control(train, result, axes=exp.axes, mpc_settings=exp.mpc or None)
+            result = select_for_control(
+                train, result, axes=exp.axes, mpc_settings=exp.mpc or None, twin=twin
+            )
         model = result.model
         if plots is not None:
             plot_pareto(result, plots)
@@ -390,7 +393,9 @@ def run_experiment(
 
         train = _run(train_sc, False, "collect")
         log(f"{exp.name} [{i}/{len(all_cases)}] {case}: identification")
-        model, wb, lqr = identify_case(train, exp, out / f"{case}__error_vs_delays.png")
+        model, wb, lqr = identify_case(
+            train, exp, out / f"{case}__error_vs_delays.png", twin=train_sc
+        )
         train.to_parquet(out / f"{case}__training.parquet")
         model.save(out / f"{case}__model.json")
         wb.save(out / f"{case}__whitebox.json")
@@ -399,8 +404,8 @@ def run_experiment(
         oracle = None
         if "mpc_oracle" in exp.controllers:
             log(f"{exp.name} [{i}/{len(all_cases)}] {case}: oracle training flight")
-            oracle_train = _run(oracle_training_scenario(exp, case, over, seed), False, "collect")
-            oracle, _, _ = identify_case(oracle_train, exp)
+            oracle_sc = oracle_training_scenario(exp, case, over, seed)
+            oracle, _, _ = identify_case(_run(oracle_sc, False, "collect"), exp, twin=oracle_sc)
             oracle.save(out / f"{case}__oracle_model.json")
         traces: dict[str, Trace] = {}
         prediction = None

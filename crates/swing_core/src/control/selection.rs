@@ -7,12 +7,20 @@
 //! `vehicle_drag` added — behind each of `input_lags`: hover, a step, hold. The first whose
 //! every run stays within `bounds` is selected; with none passing, the one that misses its
 //! bounds least (largest ratio to a bound), and its diagnostics say so.
+//!
+//! With a [`TwinPlant`] the candidate's MPC first flies the same step on the vehicle's
+//! twin (the nonlinear simulator under PX4's cascade with the white-box payload) and must
+//! settle there within `twin_bounds`; only then is it flown on the linear plants. The
+//! linear check covers drag and input lags the twin does not vary; the twin covers the
+//! attitude loop, the limits and the nonlinearity the linear plants lack. Candidates are
+//! distinct (q, p) pairs.
 
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
-use crate::config::{finite, non_negative, ConfigError};
+use crate::config::{finite, non_negative, positive, ConfigError};
 use crate::control::check::{step_check_with, StepCheck, StepCheckSettings};
+use crate::control::twin::{TwinFlight, TwinPlant};
 use crate::control::{ControlError, MpcController, MpcSettings};
 use crate::sysid::pipeline::{self, candidate_row};
 use crate::sysid::search::SearchResult;
@@ -54,6 +62,46 @@ impl CheckBounds {
     }
 }
 
+/// Bounds of the twin step flight.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TwinBounds {
+    /// Latest time after the step by which the velocity stays within 5 % of the step [s].
+    pub settle: f64,
+    /// Largest |v − setpoint| over the last second, as a fraction of the step: the twin has
+    /// no noise and no wind, so an offset-free MPC ends on the setpoint.
+    pub final_error: f64,
+}
+
+impl Default for TwinBounds {
+    fn default() -> Self {
+        // A good MPC settles a 2 m/s step in 3-4 s on the twin; candidates that take longer
+        // than 6 s creep, and in flight they creep past the end of the manoeuvre.
+        Self {
+            settle: 6.0,
+            final_error: 0.0025,
+        }
+    }
+}
+
+impl TwinBounds {
+    /// Whether a twin flight is within these bounds and the linear `bounds`' overshoot.
+    pub fn admit(&self, f: &TwinFlight, bounds: &CheckBounds) -> bool {
+        f.settle <= self.settle
+            && f.check.final_error <= self.final_error
+            && f.check.overshoot <= bounds.overshoot
+            && f.check.hold_drift <= bounds.hold_drift
+    }
+
+    /// How far a twin flight misses: the largest ratio of a figure to its bound.
+    pub fn miss(&self, f: &TwinFlight, bounds: &CheckBounds) -> f64 {
+        (f.settle / self.settle)
+            .max(f.check.final_error / self.final_error)
+            .max(f.check.overshoot / bounds.overshoot)
+            .max(f.check.hold_drift / bounds.hold_drift)
+    }
+}
+
 /// Settings of [`select_for_control`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -73,6 +121,8 @@ pub struct SelectionSettings {
     pub step: f64,
     /// Pass bounds (fractions of the step).
     pub bounds: CheckBounds,
+    /// Pass bounds of the twin step flight (when a twin is given).
+    pub twin_bounds: TwinBounds,
     /// What the plant of the check is and where its parameters came from, written into the
     /// diagnostics as `control_check.plant` (e.g. `whitebox(payload mass 0.2 kg from thrust)`).
     pub plant_label: String,
@@ -81,11 +131,12 @@ pub struct SelectionSettings {
 impl Default for SelectionSettings {
     fn default() -> Self {
         Self {
-            candidates: 20,
+            candidates: 40,
             input_lags: vec![0.0, 0.1],
             vehicle_drag: vec![0.12, 0.4],
             step: 2.0,
             bounds: CheckBounds::default(),
+            twin_bounds: TwinBounds::default(),
             plant_label: "whitebox".into(),
         }
     }
@@ -120,6 +171,8 @@ impl SelectionSettings {
         ] {
             finite(&format!("bounds.{name}"), v)?;
         }
+        positive("twin_bounds.settle", self.twin_bounds.settle)?;
+        positive("twin_bounds.final_error", self.twin_bounds.final_error)?;
         Ok(())
     }
 }
@@ -135,8 +188,27 @@ pub struct CheckedCandidate {
     pub nmae: f64,
     /// Whether every run was within the bounds.
     pub passed: bool,
-    /// Worst figures over every plant and lag.
+    /// Worst figures over every plant and lag (NaN when the twin flight failed first and
+    /// the linear plants were not flown).
     pub worst: StepCheck,
+    /// The twin step flight, when a twin was given.
+    pub twin: Option<TwinFlight>,
+}
+
+impl CheckedCandidate {
+    /// How far the candidate misses its bounds: the twin's miss first (a candidate that
+    /// fails on the twin ranks behind every one that settles there), then the linear one.
+    fn miss(&self, settings: &SelectionSettings) -> (f64, f64) {
+        let twin = self.twin.map_or(0.0, |f| {
+            settings.twin_bounds.miss(&f, &settings.bounds).max(1.0)
+        });
+        let linear = if self.worst.final_error.is_nan() {
+            f64::INFINITY
+        } else {
+            settings.bounds.miss(&self.worst)
+        };
+        (twin, linear)
+    }
 }
 
 /// Outcome of [`select_for_control`].
@@ -180,7 +252,8 @@ fn worst_check(
 }
 
 /// Pick from `search` (run on `train`/`test` with `identify`) the model to fly an MPC with
-/// `mpc_settings` on, checking each candidate against the white-box `plant` of the flight.
+/// `mpc_settings` on, checking each candidate against the white-box `plant` of the flight
+/// and, when given, first on the vehicle's `twin`.
 #[allow(clippy::too_many_arguments)]
 pub fn select_for_control(
     train: &Trajectory<'_>,
@@ -192,6 +265,7 @@ pub fn select_for_control(
     plant: &LinearModel,
     mpc_settings: &MpcSettings,
     settings: &SelectionSettings,
+    twin: Option<&TwinPlant>,
 ) -> Result<Selection, ControlError> {
     settings.validate()?;
     mpc_settings.validate()?;
@@ -216,19 +290,36 @@ pub fn select_for_control(
         .filter(|c| c.stable == Some(true))
         .collect();
     rows.sort_by(|a, b| a.nmae.total_cmp(&b.nmae));
+    // The search's stages can score the same (q, p) twice.
+    let mut seen = std::collections::HashSet::new();
+    rows.retain(|c| seen.insert((c.delays, c.rank)));
     rows.truncate(settings.candidates);
     let mut checked = Vec::new();
     let mut chosen = None;
     for row in rows {
         let model = refit(row.delays, row.rank)?;
-        let worst = worst_check(&model, mpc_settings, &plants, settings)?;
-        let passed = settings.bounds.admit(&worst);
+        let flight = match twin {
+            Some(tw) => Some(tw.fly(MpcController::new(&model, mpc_settings.clone())?)?),
+            None => None,
+        };
+        let on_twin = flight.is_none_or(|f| settings.twin_bounds.admit(&f, &settings.bounds));
+        let worst = if on_twin {
+            worst_check(&model, mpc_settings, &plants, settings)?
+        } else {
+            StepCheck {
+                overshoot: f64::NAN,
+                final_error: f64::NAN,
+                hold_drift: f64::NAN,
+            }
+        };
+        let passed = on_twin && settings.bounds.admit(&worst);
         checked.push(CheckedCandidate {
             delays: row.delays,
             rank: row.rank,
             nmae: row.nmae,
             passed,
             worst,
+            twin: flight,
         });
         if passed {
             chosen = Some(model);
@@ -242,10 +333,9 @@ pub fn select_for_control(
             let least = checked
                 .iter()
                 .min_by(|a, b| {
-                    settings
-                        .bounds
-                        .miss(&a.worst)
-                        .total_cmp(&settings.bounds.miss(&b.worst))
+                    let (ta, la) = a.miss(settings);
+                    let (tb, lb) = b.miss(settings);
+                    ta.total_cmp(&tb).then(la.total_cmp(&lb))
                 })
                 .ok_or_else(|| {
                     ControlError::Model("the search has no stable candidate to check".into())
@@ -271,6 +361,7 @@ pub fn select_for_control(
             "vehicle_drag": settings.vehicle_drag,
             "step": settings.step,
             "bounds": settings.bounds,
+            "twin": twin.map(|t| json!({"plant": t.label(), "bounds": settings.twin_bounds})),
             "passed": passed,
             "checked": checked.iter().map(|c| json!({
                 "delays": c.delays,
@@ -280,6 +371,12 @@ pub fn select_for_control(
                 "overshoot": c.worst.overshoot,
                 "final_error": c.worst.final_error,
                 "hold_drift": c.worst.hold_drift,
+                "twin": c.twin.map(|f| json!({
+                    "settle": f.settle,
+                    "overshoot": f.check.overshoot,
+                    "final_error": f.check.final_error,
+                    "hold_drift": f.check.hold_drift,
+                })),
             })).collect::<Vec<_>>(),
         }),
     );

@@ -13,10 +13,12 @@
 //! vehicle the twin's fidelity (PX4's gains, the attitude loop's lag) bounds what this
 //! gives, which is why the candidate still goes through the closed-loop check.
 
+use super::check::{overshoot, StepCheck};
 use super::selection::{select_for_control, SelectionSettings};
-use super::MpcSettings;
-use crate::plant::PayloadKind;
-use crate::sim::{Scenario, Simulator};
+use super::{ControlError, MpcController, MpcSettings};
+use crate::config::{positive, ConfigError};
+use crate::plant::{PayloadKind, WindParams};
+use crate::sim::{NoiseParams, Scenario, SetpointEntry, SimError, Simulator};
 use crate::sysid::dmdc::{self, DmdcSettings};
 use crate::sysid::hankel::Trajectory;
 use crate::sysid::pipeline::named;
@@ -165,6 +167,7 @@ impl Twin {
                 plant_label: format!("twin whitebox (payload {mass:.3} kg on {length:.2} m)"),
                 ..SelectionSettings::default()
             },
+            None,
         )
         .map_err(|e| e.to_string())?;
         if !selection.passed {
@@ -174,6 +177,193 @@ impl Twin {
             ));
         }
         Ok(selection.model)
+    }
+}
+
+/// Length of a twin step flight [s] and the time of its step [s] (as the linear check's).
+pub const TWIN_CHECK_SECONDS: f64 = 20.0;
+/// Time of the twin step flight's velocity step [s].
+pub const TWIN_CHECK_STEP_AT: f64 = 2.0;
+/// Band around the new setpoint, as a fraction of the step, that a settled velocity stays in.
+pub const SETTLE_BAND: f64 = 0.05;
+/// Span at the end of a twin step flight over which the final error is averaged [s].
+const FINAL_SPAN: f64 = 1.0;
+
+/// The twin as a plant of the control-relevant selection: a candidate's MPC flies a
+/// velocity step (hover, step at [`TWIN_CHECK_STEP_AT`], hold) on swingrt's nonlinear
+/// simulator of the vehicle under PX4's cascade, carrying the payload of the flight's
+/// white-box (a single pendulum), in still air and without sensor noise.
+///
+/// The linear check flies a candidate on a linear pendulum behind a first-order lag. What
+/// it cannot see and the twin can: the attitude loop's lag and the cascade's tilt and
+/// acceleration limits, the nonlinear pendulum and the quadratic drag. A model whose MPC
+/// passes the linear check can still fall into a ~1 Hz limit cycle against the
+/// acceleration bound on the vehicle; on the twin it does too.
+#[derive(Clone, Debug)]
+pub struct TwinPlant {
+    scenario: Scenario,
+    step: f64,
+    axes: usize,
+    label: String,
+}
+
+/// Figures of one twin step flight.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TwinFlight {
+    /// Overshoot, final error (mean over the last second) and hold drift, as fractions of
+    /// the step, worst over the axes (∞ when the flight diverged or fell back to PX4).
+    pub check: StepCheck,
+    /// Time after the step from which every axis' velocity stays within [`SETTLE_BAND`] of
+    /// the new setpoint [s] (∞: it never does).
+    pub settle: f64,
+}
+
+impl TwinFlight {
+    /// The figures of a flight that diverged or was handed back to PX4.
+    pub fn diverged() -> Self {
+        Self {
+            check: StepCheck {
+                overshoot: f64::INFINITY,
+                final_error: f64::INFINITY,
+                hold_drift: f64::INFINITY,
+            },
+            settle: f64::INFINITY,
+        }
+    }
+}
+
+impl TwinPlant {
+    /// The twin of the vehicle of `vehicle` (its airframe and PX4 gains; its payload, wind,
+    /// noise and setpoints are replaced) carrying the payload of the white-box `plant`'s
+    /// estimates, flying a `step` [m/s] on each of `axes` (1: N, 2: N and E).
+    pub fn new(
+        vehicle: &Scenario,
+        plant: &LinearModel,
+        step: f64,
+        axes: usize,
+    ) -> Result<Self, ConfigError> {
+        let wb = plant.diagnostics.whitebox.as_ref().ok_or_else(|| {
+            ConfigError::new(
+                "twin",
+                "the twin carries the white-box payload: the check plant has no white-box estimates",
+            )
+        })?;
+        positive("step", step.abs())?;
+        if !(1..=2).contains(&axes) {
+            return Err(ConfigError::new("axes", "must be 1 (N) or 2 (N+E)"));
+        }
+        let mut sc = vehicle.clone();
+        sc.name = "twin step check".into();
+        sc.duration = TWIN_CHECK_SECONDS;
+        sc.random_steps = None;
+        sc.wind = WindParams::default();
+        sc.noise = NoiseParams::default();
+        sc.payload.kind = PayloadKind::Single;
+        sc.payload.mass = wb.payload_mass;
+        sc.payload.length = wb.length;
+        sc.payload.events.clear();
+        let ve = (axes == 2).then_some(0.0);
+        sc.setpoints = vec![
+            SetpointEntry {
+                t: 0.0,
+                vn: Some(0.0),
+                ve,
+                ..Default::default()
+            },
+            SetpointEntry {
+                t: TWIN_CHECK_STEP_AT,
+                vn: Some(step),
+                ve: ve.map(|_| step),
+                ..Default::default()
+            },
+        ];
+        sc.validate()
+            .map_err(|e| ConfigError::new("twin", format!("twin scenario: {e}")))?;
+        let label = format!(
+            "twin (swingrt's simulator of the vehicle under PX4's cascade, payload {:.3} kg on {:.2} m, still air)",
+            wb.payload_mass, wb.length
+        );
+        Ok(Self {
+            scenario: sc,
+            step,
+            axes,
+            label,
+        })
+    }
+
+    /// What the twin is, for the model's diagnostics.
+    pub fn label(&self) -> &str {
+        &self.label
+    }
+
+    /// Fly `mpc` (designed for this twin's axes) on the step; a diverged flight or one
+    /// handed back to PX4 (a tick that failed) gives [`TwinFlight::diverged`].
+    pub fn fly(&self, mpc: MpcController) -> Result<TwinFlight, ControlError> {
+        use super::SwingController;
+        if mpc.axes() != self.axes {
+            return Err(ControlError::Model(format!(
+                "the twin flies {} axes, the controller {}",
+                self.axes,
+                mpc.axes()
+            )));
+        }
+        let mut sim = Simulator::new(self.scenario.clone()).map_err(sim_error)?;
+        // The check measures the control law, not the machine it runs on: no tick budget.
+        sim.attach_controller(Box::new(mpc), 0.0, f64::MAX)
+            .map_err(sim_error)?;
+        match sim.run_to_end() {
+            Ok(()) => {}
+            Err(SimError::Diverged { .. }) => return Ok(TwinFlight::diverged()),
+            Err(e) => return Err(sim_error(e)),
+        }
+        if sim.fallback_reason().is_some() {
+            return Ok(TwinFlight::diverged());
+        }
+        let trace = sim.trace();
+        let t = trace
+            .column("t")
+            .ok_or_else(|| ControlError::Model("twin flight has no time column".into()))?;
+        let mut out = TwinFlight {
+            check: StepCheck {
+                overshoot: f64::NEG_INFINITY,
+                final_error: 0.0,
+                hold_drift: 0.0,
+            },
+            settle: 0.0,
+        };
+        let step = self.step;
+        let after = t.partition_point(|&x| x < TWIN_CHECK_STEP_AT);
+        let tail = t.partition_point(|&x| x < TWIN_CHECK_SECONDS - FINAL_SPAN);
+        for name in ["vn", "ve"].iter().take(self.axes) {
+            let v = trace
+                .column(name)
+                .ok_or_else(|| ControlError::Model(format!("twin flight has no column {name}")))?;
+            let c = &mut out.check;
+            c.overshoot = c.overshoot.max(overshoot(&v[after..], 0.0, step));
+            let hold = v[..after].iter().fold(0.0_f64, |a, x| a.max(x.abs()));
+            c.hold_drift = c.hold_drift.max(hold / step.abs());
+            let end = &v[tail..];
+            let mean = end.iter().sum::<f64>() / end.len().max(1) as f64;
+            c.final_error = c.final_error.max((mean - step).abs() / step.abs());
+            let band = SETTLE_BAND * step.abs();
+            let settle = match v[after..].iter().rposition(|x| (x - step).abs() > band) {
+                None => 0.0,
+                Some(k) if after + k + 1 >= v.len() => f64::INFINITY,
+                Some(k) => t[after + k + 1] - TWIN_CHECK_STEP_AT,
+            };
+            out.settle = out.settle.max(settle);
+        }
+        if !(out.check.overshoot.is_finite() && out.check.final_error.is_finite()) {
+            return Ok(TwinFlight::diverged());
+        }
+        Ok(out)
+    }
+}
+
+fn sim_error(e: SimError) -> ControlError {
+    match e {
+        SimError::Config(c) => ControlError::Config(c),
+        other => ControlError::Model(format!("twin flight: {other}")),
     }
 }
 
@@ -310,5 +500,62 @@ mod tests {
         assert_eq!(m.delays, tpl.delays);
         let check = &m.diagnostics.extra["control_check"];
         assert_eq!(check["passed"], serde_json::json!(true), "{check}");
+    }
+
+    #[test]
+    fn the_twin_sees_the_attitude_loop_that_the_linear_check_does_not() {
+        use crate::control::check::{mpc_step_check, StepCheckSettings};
+        use crate::control::selection::{CheckBounds, TwinBounds};
+        let sc = Scenario::builtin("training").unwrap();
+        let tpl = template(&sc);
+        let mut short = sc.clone();
+        short.duration = 60.0;
+        let trace = Simulator::run(short).unwrap();
+        let t = trace.column("t").unwrap();
+        let (x, _) = resample(
+            t,
+            &[
+                trace.column("vn").unwrap(),
+                trace.column("swing_n").unwrap(),
+            ],
+            0.03,
+        );
+        let (u, _) = resample(t, &[trace.column("acc_sp_n").unwrap()], 0.03);
+        let traj = Trajectory::new(&x, 2, &u, 1).unwrap();
+        let settings = IdentifySettings {
+            cable_length: Some(sc.payload.length),
+            vehicle_mass: sc.vehicle.mass,
+            ..IdentifySettings::default()
+        };
+        let plant =
+            whitebox_model(&traj, &tpl.states, &tpl.inputs, &settings, sc.payload.mass).unwrap();
+        let twin = TwinPlant::new(&sc, &plant, 2.0, 1).unwrap();
+        let mpc = MpcSettings::default();
+        let (bounds, twin_bounds) = (CheckBounds::default(), TwinBounds::default());
+        // The MPC designed on the white-box flies that linear plant as if it were exact...
+        let lin =
+            mpc_step_check(&plant, mpc.clone(), &plant, &StepCheckSettings::default()).unwrap();
+        assert!(bounds.admit(&lin), "{lin:?}");
+        // ... but on the vehicle (the attitude loop's lag, the tilt limit) it does not settle.
+        let f = twin
+            .fly(MpcController::new(&plant, mpc.clone()).unwrap())
+            .unwrap();
+        assert!(!twin_bounds.admit(&f, &bounds), "{f:?}");
+        assert!(f.settle > twin_bounds.settle, "{f:?}");
+        // A small delay model of 30 s of the flight, which has the cascade's lag in its
+        // data, settles there.
+        let g = twin.fly(MpcController::new(&tpl, mpc).unwrap()).unwrap();
+        assert!(g.settle > 0.5 && g.settle < twin_bounds.settle, "{g:?}");
+        assert!(
+            g.check.overshoot < 0.35 && g.check.final_error < 0.01,
+            "{g:?}"
+        );
+    }
+
+    #[test]
+    fn the_twin_needs_a_white_box_and_the_controller_s_axes() {
+        let sc = Scenario::builtin("training").unwrap();
+        let tpl = template(&sc);
+        assert!(TwinPlant::new(&sc, &tpl, 2.0, 1).is_err());
     }
 }
