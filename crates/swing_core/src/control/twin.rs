@@ -411,22 +411,22 @@ mod tests {
         }
     }
 
+    /// The first `seconds` of the flight `sc`: (vn, swing_n) and acc_sp_n at 0.03 s.
+    fn flight(sc: &Scenario, seconds: f64) -> (Vec<f64>, Vec<f64>) {
+        let mut sc = sc.clone();
+        sc.duration = seconds;
+        let trace = Simulator::run(sc).unwrap();
+        let t = trace.column("t").unwrap();
+        let col = |n: &str| trace.column(n).unwrap();
+        let (x, _) = resample(t, &[col("vn"), col("swing_n")], 0.03);
+        let (u, _) = resample(t, &[col("acc_sp_n")], 0.03);
+        (x, u)
+    }
+
     /// The training flight's model as a template: DMDc q = 6 on 30 s of the built-in
     /// training flight.
     fn template(sc: &Scenario) -> LinearModel {
-        let mut sc = sc.clone();
-        sc.duration = 30.0;
-        let trace = Simulator::run(sc).unwrap();
-        let t = trace.column("t").unwrap();
-        let (x, _) = resample(
-            t,
-            &[
-                trace.column("vn").unwrap(),
-                trace.column("swing_n").unwrap(),
-            ],
-            0.03,
-        );
-        let (u, _) = resample(t, &[trace.column("acc_sp_n").unwrap()], 0.03);
+        let (x, u) = flight(sc, 30.0);
         let traj = Trajectory::new(&x, 2, &u, 1).unwrap();
         let settings = DmdcSettings {
             delays: 6,
@@ -508,19 +508,7 @@ mod tests {
         use crate::control::selection::{CheckBounds, TwinBounds};
         let sc = Scenario::builtin("training").unwrap();
         let tpl = template(&sc);
-        let mut short = sc.clone();
-        short.duration = 60.0;
-        let trace = Simulator::run(short).unwrap();
-        let t = trace.column("t").unwrap();
-        let (x, _) = resample(
-            t,
-            &[
-                trace.column("vn").unwrap(),
-                trace.column("swing_n").unwrap(),
-            ],
-            0.03,
-        );
-        let (u, _) = resample(t, &[trace.column("acc_sp_n").unwrap()], 0.03);
+        let (x, u) = flight(&sc, 60.0);
         let traj = Trajectory::new(&x, 2, &u, 1).unwrap();
         let settings = IdentifySettings {
             cable_length: Some(sc.payload.length),
