@@ -248,7 +248,7 @@ def select_for_control(
     *,
     axes: str = "n",
     mpc_settings: Mapping[str, Any] | None = None,
-    candidates: int = 40,
+    candidates: int = 80,
     input_lags: Sequence[float] = (0.0, 0.1),
     vehicle_drag: Sequence[float] = (0.12, 0.4),
     step: float = 2.0,
@@ -258,8 +258,10 @@ def select_for_control(
     **settings: Any,
 ) -> SearchResult:
     """Pick from a search the model to fly an MPC on (control-relevant selection, see
-    ``swing_core::control::selection``): the ``candidates`` stable (q, p) of lowest NMAE,
-    best first, fly the MPC (``mpc_settings``) on the white-box model of the same flight,
+    ``swing_core::control::selection``): up to ``candidates`` distinct (q, p), the stable
+    ones of lowest NMAE first, then (with a ``twin``) those the search did not screen,
+    screened in turn, fly
+    the MPC (``mpc_settings``) on the white-box model of the same flight,
     with each of ``vehicle_drag`` [1/s] added and behind each of ``input_lags`` [s]: hover,
     a ``step`` m/s step, hold; the first within ``bounds`` (fractions of the step:
     ``overshoot``, ``final_error``, ``hold_drift``) is taken, else the least violating. The
@@ -268,10 +270,13 @@ def select_for_control(
 
     With ``twin`` (a scenario of the vehicle: its airframe and PX4 gains, e.g. the training
     flight's), each candidate's MPC first flies the step on swingrt's nonlinear simulator of
-    that vehicle carrying the white-box payload, in still air, and must settle within
-    ``twin_bounds`` (``settle`` [s] after the step, ``final_error`` as a fraction of it)
-    before the linear plants are flown. Without a white-box (a model-only check) the twin is
-    not flown."""
+    that vehicle carrying the white-box payload (both links when the swing shows a second
+    one, ``diagnostics['whitebox']['links']``), with the flight's swing-sensor noise, in still
+    air, and must settle within ``twin_bounds`` (``settle`` [s] after the step,
+    ``final_error`` as a fraction of it) before the linear plants are flown; of those that
+    settle, the first whose swing excess stays within ``swing_vs_pid`` of PX4's own on the
+    same step (or below ``swing_excess_min`` deg·s) is taken, else the one that swings
+    least. Without a white-box (a model-only check) the twin is not flown."""
     if result.search is None:
         raise ConfigError("result: not from a search (no candidates to check)", field="result")
     s = identify_settings(**{**result.settings, **settings})

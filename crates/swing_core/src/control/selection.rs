@@ -1,19 +1,23 @@
 //! Control-relevant model selection: from a search's candidates, the model to fly an MPC on.
 //!
 //! Rollout NMAE alone is a poor guide (see `check`): models within a few percent of the best
-//! can carry spurious slow modes that the MPC's feedback excites. The `candidates` stable
-//! (q, p) of lowest held-out NMAE are refitted and, best first, the MPC designed on each flies
-//! the white-box model of the same flight in closed loop — as identified, and with each of
-//! `vehicle_drag` added — behind each of `input_lags`: hover, a step, hold. The first whose
-//! every run stays within `bounds` is selected; with none passing, the one that misses its
-//! bounds least (largest ratio to a bound), and its diagnostics say so.
+//! can carry spurious slow modes that the MPC's feedback excites. Up to `candidates`
+//! distinct (q, p) are refitted and, best first, the MPC designed on each flies the
+//! white-box model of the same flight in closed loop — as identified, and with each of
+//! `vehicle_drag` added — behind each of `input_lags`: hover, a step, hold. The stable rows
+//! of the search come first, in NMAE order; with a twin, the rows it did not screen (worse
+//! than a stable p of their q) follow, each screened when its turn comes. The first candidate whose every
+//! run stays within `bounds` is selected; with none passing, the one that misses its bounds
+//! least (largest ratio to a bound), and its diagnostics say so.
 //!
 //! With a [`TwinPlant`] the candidate's MPC first flies the same step on the vehicle's
-//! twin (the nonlinear simulator under PX4's cascade with the white-box payload) and must
-//! settle there within `twin_bounds`; only then is it flown on the linear plants. The
-//! linear check covers drag and input lags the twin does not vary; the twin covers the
-//! attitude loop, the limits and the nonlinearity the linear plants lack. Candidates are
-//! distinct (q, p) pairs.
+//! twin (the nonlinear simulator under PX4's cascade with the white-box payload and the
+//! flight's sensor noise) and must settle there within `twin_bounds`; only then is it
+//! flown on the linear plants. The linear check covers drag and input lags the twin does
+//! not vary; the twin covers the attitude loop, the limits and the nonlinearity the linear
+//! plants lack. A candidate that settles everywhere must also damp the swing: its twin
+//! swing excess within a fraction of PX4's own on the same step. When none does, the
+//! settled candidate that swings least is taken rather than the first that settled.
 
 use serde::{Deserialize, Serialize};
 use serde_json::json;
@@ -71,32 +75,71 @@ pub struct TwinBounds {
     /// Largest |v − setpoint| over the last second, as a fraction of the step: the twin has
     /// no noise and no wind, so an offset-free MPC ends on the setpoint.
     pub final_error: f64,
+    /// Largest wander of the velocity over the hold (`TwinFlight::wander`: 2 s mean error),
+    /// as a fraction of the step, or PX4's own on the same step if that is larger (its
+    /// velocity integrator still creeps): the twin flies with the flight's swing-sensor
+    /// noise, and an MPC that turns it into velocity wanders off the setpoint in flight.
+    pub wander: f64,
+    /// Largest swing excess (`TwinFlight::swing_excess`) as a fraction of PX4's alone on
+    /// the same step: an MPC that moves the vehicle without damping the payload swings as
+    /// PX4 does.
+    pub swing_vs_pid: f64,
+    /// ... unless the excess is below this [deg·s]: a short cable's swing is small and
+    /// short-lived under any controller.
+    pub swing_excess_min: f64,
 }
 
 impl Default for TwinBounds {
     fn default() -> Self {
         // A good MPC settles a 2 m/s step in 3-4 s on the twin; candidates that take longer
         // than 6 s creep, and in flight they creep past the end of the manoeuvre.
+        // PX4 alone leaves 5-20 deg·s of swing excess on a 2 m/s step with a 0.3-3 m cable;
+        // the MPCs that damp it leave a tenth of that, the ones that do not, half or more.
         Self {
             settle: 6.0,
-            final_error: 0.0025,
+            final_error: 0.005,
+            wander: 0.005,
+            swing_vs_pid: 0.3,
+            swing_excess_min: 1.0,
         }
     }
 }
 
 impl TwinBounds {
-    /// Whether a twin flight is within these bounds and the linear `bounds`' overshoot.
-    pub fn admit(&self, f: &TwinFlight, bounds: &CheckBounds) -> bool {
+    /// The largest wander admitted, given PX4's own flight `pid` of the same step.
+    pub fn wander_bound(&self, pid: &TwinFlight) -> f64 {
+        if pid.wander.is_finite() {
+            self.wander.max(pid.wander)
+        } else {
+            self.wander
+        }
+    }
+
+    /// Whether a twin flight is within these bounds (the wander's given PX4's own flight
+    /// `pid`) and the linear `bounds`' overshoot.
+    pub fn admit(&self, f: &TwinFlight, pid: &TwinFlight, bounds: &CheckBounds) -> bool {
         f.settle <= self.settle
             && f.check.final_error <= self.final_error
+            && f.wander <= self.wander_bound(pid)
             && f.check.overshoot <= bounds.overshoot
             && f.check.hold_drift <= bounds.hold_drift
     }
 
+    /// The largest swing excess admitted, given PX4's own flight `pid` of the same step.
+    pub fn swing_bound(&self, pid: &TwinFlight) -> f64 {
+        (self.swing_vs_pid * pid.swing_excess).max(self.swing_excess_min)
+    }
+
+    /// Whether a twin flight damps the swing: its excess is within [`Self::swing_bound`].
+    pub fn damps(&self, f: &TwinFlight, pid: &TwinFlight) -> bool {
+        f.swing_excess <= self.swing_bound(pid)
+    }
+
     /// How far a twin flight misses: the largest ratio of a figure to its bound.
-    pub fn miss(&self, f: &TwinFlight, bounds: &CheckBounds) -> f64 {
+    pub fn miss(&self, f: &TwinFlight, pid: &TwinFlight, bounds: &CheckBounds) -> f64 {
         (f.settle / self.settle)
             .max(f.check.final_error / self.final_error)
+            .max(f.wander / self.wander_bound(pid))
             .max(f.check.overshoot / bounds.overshoot)
             .max(f.check.hold_drift / bounds.hold_drift)
     }
@@ -131,7 +174,7 @@ pub struct SelectionSettings {
 impl Default for SelectionSettings {
     fn default() -> Self {
         Self {
-            candidates: 40,
+            candidates: 80,
             input_lags: vec![0.0, 0.1],
             vehicle_drag: vec![0.12, 0.4],
             step: 2.0,
@@ -173,6 +216,12 @@ impl SelectionSettings {
         }
         positive("twin_bounds.settle", self.twin_bounds.settle)?;
         positive("twin_bounds.final_error", self.twin_bounds.final_error)?;
+        positive("twin_bounds.wander", self.twin_bounds.wander)?;
+        non_negative("twin_bounds.swing_vs_pid", self.twin_bounds.swing_vs_pid)?;
+        non_negative(
+            "twin_bounds.swing_excess_min",
+            self.twin_bounds.swing_excess_min,
+        )?;
         Ok(())
     }
 }
@@ -188,6 +237,9 @@ pub struct CheckedCandidate {
     pub nmae: f64,
     /// Whether every run was within the bounds.
     pub passed: bool,
+    /// Whether every run was within the bounds but the twin's swing bound (= `passed`
+    /// without a twin).
+    pub settled: bool,
     /// Worst figures over every plant and lag (NaN when the twin flight failed first and
     /// the linear plants were not flown).
     pub worst: StepCheck,
@@ -198,10 +250,14 @@ pub struct CheckedCandidate {
 impl CheckedCandidate {
     /// How far the candidate misses its bounds: the twin's miss first (a candidate that
     /// fails on the twin ranks behind every one that settles there), then the linear one.
-    fn miss(&self, settings: &SelectionSettings) -> (f64, f64) {
-        let twin = self.twin.map_or(0.0, |f| {
-            settings.twin_bounds.miss(&f, &settings.bounds).max(1.0)
-        });
+    fn miss(&self, settings: &SelectionSettings, pid: Option<&TwinFlight>) -> (f64, f64) {
+        let twin = match (self.twin, pid) {
+            (Some(f), Some(pid)) => settings
+                .twin_bounds
+                .miss(&f, pid, &settings.bounds)
+                .max(1.0),
+            _ => 0.0,
+        };
         let linear = if self.worst.final_error.is_nan() {
             f64::INFINITY
         } else {
@@ -284,25 +340,54 @@ pub fn select_for_control(
         pipeline::score(&mut m, test, identify)?;
         Ok(m)
     };
+    // Stable rows first, best first: the screen's verdict is in the table. With a twin,
+    // rows the search did not screen (worse than a stable p of their q) follow, screened
+    // when their turn comes: a model whose rollout ranks behind can still be the one whose
+    // MPC damps, and the twin's flight, not the linear check alone, is what vets it.
     let mut rows: Vec<_> = search
         .table
         .iter()
-        .filter(|c| c.stable == Some(true))
+        .filter(|c| c.nmae.is_finite() && (c.stable == Some(true) || twin.is_some()))
         .collect();
-    rows.sort_by(|a, b| a.nmae.total_cmp(&b.nmae));
+    rows.sort_by(|a, b| {
+        (a.stable != Some(true))
+            .cmp(&(b.stable != Some(true)))
+            .then(a.nmae.total_cmp(&b.nmae))
+    });
+    rows.retain(|c| c.stable != Some(false));
     // The search's stages can score the same (q, p) twice.
     let mut seen = std::collections::HashSet::new();
     rows.retain(|c| seen.insert((c.delays, c.rank)));
-    rows.truncate(settings.candidates);
-    let mut checked = Vec::new();
+    let screen = identify.search_settings().map(|s| s.screen(train));
+    let mut screened_out = 0usize;
+    let mut verdicts = std::collections::HashMap::new();
+    let mut checked: Vec<CheckedCandidate> = Vec::new();
     let mut chosen = None;
     for row in rows {
+        if checked.len() >= settings.candidates {
+            break;
+        }
         let model = refit(row.delays, row.rank)?;
+        if row.stable.is_none() {
+            if let Some(screen) = &screen {
+                let verdict = screen.judge(&model.a)?;
+                if !verdict.stable {
+                    screened_out += 1;
+                    continue;
+                }
+                verdicts.insert((row.delays, row.rank), verdict);
+            }
+        }
         let flight = match twin {
             Some(tw) => Some(tw.fly(MpcController::new(&model, mpc_settings.clone())?)?),
             None => None,
         };
-        let on_twin = flight.is_none_or(|f| settings.twin_bounds.admit(&f, &settings.bounds));
+        let on_twin = match (twin, &flight) {
+            (Some(tw), Some(f)) => settings
+                .twin_bounds
+                .admit(f, tw.pid_flight(), &settings.bounds),
+            _ => true,
+        };
         let worst = if on_twin {
             worst_check(&model, mpc_settings, &plants, settings)?
         } else {
@@ -312,36 +397,56 @@ pub fn select_for_control(
                 hold_drift: f64::NAN,
             }
         };
-        let passed = on_twin && settings.bounds.admit(&worst);
+        let settled = on_twin && settings.bounds.admit(&worst);
+        let damps = match (twin, &flight) {
+            (Some(tw), Some(f)) => settings.twin_bounds.damps(f, tw.pid_flight()),
+            _ => true,
+        };
         checked.push(CheckedCandidate {
             delays: row.delays,
             rank: row.rank,
             nmae: row.nmae,
-            passed,
+            passed: settled && damps,
+            settled,
             worst,
             twin: flight,
         });
-        if passed {
+        if settled && damps {
             chosen = Some(model);
             break;
         }
     }
     let passed = chosen.is_some();
-    let mut model = match chosen {
-        Some(m) => m,
-        None => {
-            let least = checked
-                .iter()
-                .min_by(|a, b| {
-                    let (ta, la) = a.miss(settings);
-                    let (tb, lb) = b.miss(settings);
-                    ta.total_cmp(&tb).then(la.total_cmp(&lb))
-                })
-                .ok_or_else(|| {
-                    ControlError::Model("the search has no stable candidate to check".into())
-                })?;
-            refit(least.delays, least.rank)?
-        }
+    // Without a pass: the settled candidate that swings least, else the least miss.
+    let least_swing = checked.iter().filter(|c| c.settled).min_by(|a, b| {
+        let swing = |c: &CheckedCandidate| c.twin.map_or(f64::INFINITY, |f| f.swing_excess);
+        swing(a).total_cmp(&swing(b))
+    });
+    let (mut model, pick) = match chosen {
+        Some(m) => (m, "the first candidate within every bound"),
+        None => match least_swing {
+            Some(c) => (
+                refit(c.delays, c.rank)?,
+                "none damped the swing within the bound: the settled candidate that swings least",
+            ),
+            None => {
+                let least = checked
+                    .iter()
+                    .min_by(|a, b| {
+                        let pid = twin.map(TwinPlant::pid_flight);
+                        let (ta, la) = a.miss(settings, pid);
+                        let (tb, lb) = b.miss(settings, pid);
+                        ta.total_cmp(&tb).then(la.total_cmp(&lb))
+                    })
+                    .ok_or_else(|| {
+                        ControlError::Model("the search has no stable candidate to check".into())
+                    })?;
+                (
+                    refit(least.delays, least.rank)?,
+                    "none settled: the candidate that misses its bounds least",
+                )
+            }
+        },
     };
     let selected = search
         .table
@@ -350,7 +455,11 @@ pub fn select_for_control(
         .unwrap_or(best);
     let extra = &mut model.diagnostics.extra;
     extra.insert("selected".into(), candidate_row(selected, states));
-    if let Some(v) = &selected.verdict {
+    if let Some(v) = selected
+        .verdict
+        .as_ref()
+        .or(verdicts.get(&(model.delays, model.rank)))
+    {
         extra.insert("stability_screen".into(), v.to_json());
     }
     extra.insert(
@@ -361,22 +470,25 @@ pub fn select_for_control(
             "vehicle_drag": settings.vehicle_drag,
             "step": settings.step,
             "bounds": settings.bounds,
-            "twin": twin.map(|t| json!({"plant": t.label(), "bounds": settings.twin_bounds})),
+            "twin": twin.map(|t| json!({
+                "plant": t.label(),
+                "bounds": settings.twin_bounds,
+                "pid": flight_json(t.pid_flight()),
+                "swing_bound": settings.twin_bounds.swing_bound(t.pid_flight()),
+            })),
             "passed": passed,
+            "pick": pick,
+            "screened_out": screened_out,
             "checked": checked.iter().map(|c| json!({
                 "delays": c.delays,
                 "rank": c.rank,
                 "nmae": c.nmae,
                 "passed": c.passed,
+                "settled": c.settled,
                 "overshoot": c.worst.overshoot,
                 "final_error": c.worst.final_error,
                 "hold_drift": c.worst.hold_drift,
-                "twin": c.twin.map(|f| json!({
-                    "settle": f.settle,
-                    "overshoot": f.check.overshoot,
-                    "final_error": f.check.final_error,
-                    "hold_drift": f.check.hold_drift,
-                })),
+                "twin": c.twin.as_ref().map(flight_json),
             })).collect::<Vec<_>>(),
         }),
     );
@@ -384,5 +496,17 @@ pub fn select_for_control(
         model,
         passed,
         checked,
+    })
+}
+
+/// A twin flight's figures for the diagnostics.
+fn flight_json(f: &TwinFlight) -> serde_json::Value {
+    json!({
+        "settle": f.settle,
+        "overshoot": f.check.overshoot,
+        "final_error": f.check.final_error,
+        "hold_drift": f.check.hold_drift,
+        "swing_excess": f.swing_excess,
+        "wander": f.wander,
     })
 }

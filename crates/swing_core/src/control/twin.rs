@@ -188,6 +188,11 @@ pub const TWIN_CHECK_STEP_AT: f64 = 2.0;
 pub const SETTLE_BAND: f64 = 0.05;
 /// Span at the end of a twin step flight over which the final error is averaged [s].
 const FINAL_SPAN: f64 = 1.0;
+/// Start of the span over which the velocity's wander is measured [s].
+pub const WANDER_FROM: f64 = 10.0;
+/// Length of the blocks whose mean velocity error is the wander [s]: a flight's
+/// steady-state error is the mean over its last 2 s.
+pub const WANDER_SPAN: f64 = 2.0;
 
 /// The twin as a plant of the control-relevant selection: a candidate's MPC flies a
 /// velocity step (hover, step at [`TWIN_CHECK_STEP_AT`], hold) on swingrt's nonlinear
@@ -205,6 +210,7 @@ pub struct TwinPlant {
     step: f64,
     axes: usize,
     label: String,
+    pid: TwinFlight,
 }
 
 /// Figures of one twin step flight.
@@ -216,6 +222,17 @@ pub struct TwinFlight {
     /// Time after the step from which every axis' velocity stays within [`SETTLE_BAND`] of
     /// the new setpoint [s] (∞: it never does).
     pub settle: f64,
+    /// Swing left to the controller after the step, summed over the axes [deg·s]:
+    /// ∫|θ − θ_f| dt − |∫(θ − θ_f) dt| with θ_f the mean swing of the last second. The
+    /// second term is the payload's momentum change (g·∫θ dt ≈ Δv), which every controller
+    /// needs; what is left is swing that a damping controller removes (`metrics.csv`'s
+    /// `swing_excess_iae_deg_s`, on the twin).
+    pub swing_excess: f64,
+    /// RMS over the hold of the velocity's error averaged over the trailing [`WANDER_SPAN`]
+    /// (from [`WANDER_FROM`] on), as a fraction of the step: how far the flight's sensor
+    /// noise, fed through the MPC, moves the vehicle once it has settled, at the time scale
+    /// of a flight's steady-state error (the mean over its last 2 s).
+    pub wander: f64,
 }
 
 impl TwinFlight {
@@ -228,6 +245,8 @@ impl TwinFlight {
                 hold_drift: f64::INFINITY,
             },
             settle: f64::INFINITY,
+            swing_excess: f64::INFINITY,
+            wander: f64::INFINITY,
         }
     }
 }
@@ -262,6 +281,18 @@ impl TwinPlant {
         sc.payload.mass = wb.payload_mass;
         sc.payload.length = wb.length;
         sc.payload.events.clear();
+        // The flight's own swing-sensor noise: a model whose MPC feeds it into the
+        // velocity wanders off the setpoint in flight, and on the twin too.
+        sc.noise.swing_std = wb.swing_noise.unwrap_or(0.0);
+        // A second link found in the swing: the lower mode an MPC can excite unseen.
+        if let Some(d) = wb.links {
+            let m = wb.payload_mass;
+            sc.payload.kind = PayloadKind::Double;
+            sc.payload.mass = m / (1.0 + d.mass_ratio);
+            sc.payload.mass2 = m * d.mass_ratio / (1.0 + d.mass_ratio);
+            sc.payload.length = d.length;
+            sc.payload.length2 = d.length2;
+        }
         let ve = (axes == 2).then_some(0.0);
         sc.setpoints = vec![
             SetpointEntry {
@@ -279,16 +310,35 @@ impl TwinPlant {
         ];
         sc.validate()
             .map_err(|e| ConfigError::new("twin", format!("twin scenario: {e}")))?;
+        let payload = match wb.links {
+            Some(d) => format!(
+                "double pendulum {:.3} kg on {:.2} m, {:.3} kg {:.2} m below",
+                sc.payload.mass, d.length, sc.payload.mass2, d.length2
+            ),
+            None => format!("payload {:.3} kg on {:.2} m", wb.payload_mass, wb.length),
+        };
         let label = format!(
-            "twin (swingrt's simulator of the vehicle under PX4's cascade, payload {:.3} kg on {:.2} m, still air)",
-            wb.payload_mass, wb.length
+            "twin (swingrt's simulator of the vehicle under PX4's cascade, {payload}, still air)"
         );
+        let mut pid = Simulator::new(sc.clone())
+            .map_err(|e| ConfigError::new("twin", format!("twin scenario: {e}")))?;
+        let pid = match pid.run_to_end() {
+            Ok(()) => measure(&pid, step, axes)
+                .map_err(|e| ConfigError::new("twin", format!("PX4 alone on the twin: {e}")))?,
+            Err(_) => TwinFlight::diverged(),
+        };
         Ok(Self {
             scenario: sc,
             step,
             axes,
             label,
+            pid,
         })
+    }
+
+    /// The same step flown by PX4's cascade alone: the swing a candidate must damp.
+    pub fn pid_flight(&self) -> &TwinFlight {
+        &self.pid
     }
 
     /// What the twin is, for the model's diagnostics.
@@ -319,45 +369,94 @@ impl TwinPlant {
         if sim.fallback_reason().is_some() {
             return Ok(TwinFlight::diverged());
         }
-        let trace = sim.trace();
-        let t = trace
-            .column("t")
-            .ok_or_else(|| ControlError::Model("twin flight has no time column".into()))?;
-        let mut out = TwinFlight {
-            check: StepCheck {
-                overshoot: f64::NEG_INFINITY,
-                final_error: 0.0,
-                hold_drift: 0.0,
-            },
-            settle: 0.0,
-        };
-        let step = self.step;
-        let after = t.partition_point(|&x| x < TWIN_CHECK_STEP_AT);
-        let tail = t.partition_point(|&x| x < TWIN_CHECK_SECONDS - FINAL_SPAN);
-        for name in ["vn", "ve"].iter().take(self.axes) {
-            let v = trace
-                .column(name)
-                .ok_or_else(|| ControlError::Model(format!("twin flight has no column {name}")))?;
-            let c = &mut out.check;
-            c.overshoot = c.overshoot.max(overshoot(&v[after..], 0.0, step));
-            let hold = v[..after].iter().fold(0.0_f64, |a, x| a.max(x.abs()));
-            c.hold_drift = c.hold_drift.max(hold / step.abs());
-            let end = &v[tail..];
-            let mean = end.iter().sum::<f64>() / end.len().max(1) as f64;
-            c.final_error = c.final_error.max((mean - step).abs() / step.abs());
-            let band = SETTLE_BAND * step.abs();
-            let settle = match v[after..].iter().rposition(|x| (x - step).abs() > band) {
-                None => 0.0,
-                Some(k) if after + k + 1 >= v.len() => f64::INFINITY,
-                Some(k) => t[after + k + 1] - TWIN_CHECK_STEP_AT,
-            };
-            out.settle = out.settle.max(settle);
-        }
-        if !(out.check.overshoot.is_finite() && out.check.final_error.is_finite()) {
-            return Ok(TwinFlight::diverged());
-        }
-        Ok(out)
+        measure(&sim, self.step, self.axes)
     }
+}
+
+/// Figures of the finished twin step flight `sim` (a `step` [m/s] on `axes` axes).
+fn measure(sim: &Simulator, step: f64, axes: usize) -> Result<TwinFlight, ControlError> {
+    let trace = sim.trace();
+    let column = |name: &str| {
+        trace
+            .column(name)
+            .ok_or_else(|| ControlError::Model(format!("twin flight has no column {name}")))
+    };
+    let t = column("t")?;
+    let mut out = TwinFlight {
+        check: StepCheck {
+            overshoot: f64::NEG_INFINITY,
+            final_error: 0.0,
+            hold_drift: 0.0,
+        },
+        settle: 0.0,
+        swing_excess: 0.0,
+        wander: 0.0,
+    };
+    let after = t.partition_point(|&x| x < TWIN_CHECK_STEP_AT);
+    let tail = t.partition_point(|&x| x < TWIN_CHECK_SECONDS - FINAL_SPAN);
+    for (v_name, swing_name) in [("vn", "swing_true_n"), ("ve", "swing_true_e")]
+        .iter()
+        .take(axes)
+    {
+        let v = column(v_name)?;
+        let c = &mut out.check;
+        c.overshoot = c.overshoot.max(overshoot(&v[after..], 0.0, step));
+        let hold = v[..after].iter().fold(0.0_f64, |a, x| a.max(x.abs()));
+        c.hold_drift = c.hold_drift.max(hold / step.abs());
+        c.final_error = c
+            .final_error
+            .max((mean(&v[tail..]) - step).abs() / step.abs());
+        let band = SETTLE_BAND * step.abs();
+        let settle = match v[after..].iter().rposition(|x| (x - step).abs() > band) {
+            None => 0.0,
+            Some(k) if after + k + 1 >= v.len() => f64::INFINITY,
+            Some(k) => t[after + k + 1] - TWIN_CHECK_STEP_AT,
+        };
+        out.settle = out.settle.max(settle);
+        // Trailing WANDER_SPAN means of the error, from WANDER_FROM + WANDER_SPAN on.
+        let start = t.partition_point(|&x| x < WANDER_FROM);
+        let mut window = std::collections::VecDeque::new();
+        let (mut sum, mut sq, mut count) = (0.0, 0.0, 0usize);
+        for k in start..v.len() {
+            window.push_back(k);
+            sum += v[k] - step;
+            while let Some(&j) = window.front() {
+                if t[k] - t[j] < WANDER_SPAN {
+                    break;
+                }
+                sum -= v[j] - step;
+                window.pop_front();
+            }
+            if t[k] >= WANDER_FROM + WANDER_SPAN {
+                sq += (sum / window.len() as f64).powi(2);
+                count += 1;
+            }
+        }
+        let rms = (sq / count.max(1) as f64).sqrt();
+        out.wander = out.wander.max(rms / step.abs());
+        let swing = column(swing_name)?;
+        let last = mean(&swing[tail..]);
+        let (mut iae, mut signed) = (0.0, 0.0);
+        for k in after..t.len().saturating_sub(1) {
+            let dt = t[k + 1] - t[k];
+            let d = (swing[k] - last).to_degrees();
+            iae += d.abs() * dt;
+            signed += d * dt;
+        }
+        out.swing_excess += iae - signed.abs();
+    }
+    if !(out.check.overshoot.is_finite()
+        && out.check.final_error.is_finite()
+        && out.swing_excess.is_finite()
+        && out.wander.is_finite())
+    {
+        return Ok(TwinFlight::diverged());
+    }
+    Ok(out)
+}
+
+fn mean(x: &[f64]) -> f64 {
+    x.iter().sum::<f64>() / x.len().max(1) as f64
 }
 
 fn sim_error(e: SimError) -> ControlError {
@@ -502,10 +601,9 @@ mod tests {
         assert_eq!(check["passed"], serde_json::json!(true), "{check}");
     }
 
-    #[test]
-    fn the_twin_sees_the_attitude_loop_that_the_linear_check_does_not() {
-        use crate::control::check::{mpc_step_check, StepCheckSettings};
-        use crate::control::selection::{CheckBounds, TwinBounds};
+    /// The builtin training vehicle's twin: a small delay model of 60 s of its flight, the
+    /// white-box of that flight (the true cable length) and the twin carrying it.
+    fn builtin_twin() -> (LinearModel, LinearModel, TwinPlant) {
         let sc = Scenario::builtin("training").unwrap();
         let tpl = template(&sc);
         let (x, u) = flight(&sc, 60.0);
@@ -518,6 +616,32 @@ mod tests {
         let plant =
             whitebox_model(&traj, &tpl.states, &tpl.inputs, &settings, sc.payload.mass).unwrap();
         let twin = TwinPlant::new(&sc, &plant, 2.0, 1).unwrap();
+        (tpl, plant, twin)
+    }
+
+    #[test]
+    fn the_twin_measures_how_much_of_px4_s_swing_the_mpc_removes() {
+        use crate::control::selection::TwinBounds;
+        let (tpl, _, twin) = builtin_twin();
+        let bounds = TwinBounds::default();
+        // PX4 alone leaves the payload ringing after the step ...
+        let pid = *twin.pid_flight();
+        assert!(pid.swing_excess > 5.0, "{pid:?}");
+        assert!(!bounds.damps(&pid, &pid), "{pid:?}");
+        // ... an MPC on a model of the flight damps it, and the velocity settles sooner.
+        let f = twin
+            .fly(MpcController::new(&tpl, MpcSettings::default()).unwrap())
+            .unwrap();
+        assert!(bounds.damps(&f, &pid), "{f:?} vs {pid:?}");
+        assert!(f.swing_excess < 0.3 * pid.swing_excess, "{f:?} vs {pid:?}");
+        assert!(f.settle < pid.settle, "{f:?} vs {pid:?}");
+    }
+
+    #[test]
+    fn the_twin_sees_the_attitude_loop_that_the_linear_check_does_not() {
+        use crate::control::check::{mpc_step_check, StepCheckSettings};
+        use crate::control::selection::{CheckBounds, TwinBounds};
+        let (tpl, plant, twin) = builtin_twin();
         let mpc = MpcSettings::default();
         let (bounds, twin_bounds) = (CheckBounds::default(), TwinBounds::default());
         // The MPC designed on the white-box flies that linear plant as if it were exact...
@@ -528,7 +652,7 @@ mod tests {
         let f = twin
             .fly(MpcController::new(&plant, mpc.clone()).unwrap())
             .unwrap();
-        assert!(!twin_bounds.admit(&f, &bounds), "{f:?}");
+        assert!(!twin_bounds.admit(&f, twin.pid_flight(), &bounds), "{f:?}");
         assert!(f.settle > twin_bounds.settle, "{f:?}");
         // A small delay model of 30 s of the flight, which has the cascade's lag in its
         // data, settles there.

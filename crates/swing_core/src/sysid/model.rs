@@ -86,6 +86,14 @@ pub struct WhiteboxEstimates {
     pub frequency_hz: Option<f64>,
     /// Joint friction coefficient c of eq. 5.7 [N·m·s/rad].
     pub friction: f64,
+    /// A second link found in the swing (`sysid::links`), when the length was estimated:
+    /// the model stays a single pendulum of `length`; the vehicle's twin carries both links.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub links: Option<super::links::DoublePendulum>,
+    /// Standard deviation of the swing sensor's white noise [rad], estimated from the
+    /// training swing (`whitebox::noise_std`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub swing_noise: Option<f64>,
 }
 
 /// Diagnostics stored with a model.

@@ -8,6 +8,7 @@ use serde_json::{json, Value};
 
 use super::error::{data, SysidError};
 use super::hankel::Trajectory;
+use super::links::{self, LinkSettings};
 use super::model::LinearModel;
 use super::search::{grid_search, refine, Candidate, SearchResult};
 use super::settings::{IdentifyMethod, IdentifySettings, SearchMode};
@@ -189,6 +190,7 @@ pub fn whitebox_model(
             "the white-box needs a velocity and a swing per input, got states {states:?}"
         )));
     }
+    let mut links = None;
     let (length, freq) = match settings.cable_length {
         Some(l) => (l, None),
         None => {
@@ -205,6 +207,8 @@ pub fn whitebox_model(
             let [lo, hi] = settings.swing_band;
             let f = whitebox::fft_peak_frequency(&swing, settings.dt, lo, hi)?;
             let l = whitebox::cable_length(f, settings.vehicle_mass, payload_mass, GRAVITY);
+            let v: Vec<f64> = (0..train.len).map(|k| train.state(k)[j - axes]).collect();
+            links = links::double_pendulum(&v, &swing, settings.dt, &LinkSettings::default());
             (l, Some(f))
         }
     };
@@ -214,7 +218,13 @@ pub fn whitebox_model(
         l: length,
         c: settings.friction,
     };
-    let model = whitebox::model(&params, axes, settings.dt, freq)?;
+    let mut model = whitebox::model(&params, axes, settings.dt, freq)?;
+    if let Some(wb) = model.diagnostics.whitebox.as_mut() {
+        wb.links = links;
+        let j = (axes..2 * axes).next().expect("at least one axis");
+        let swing: Vec<f64> = (0..train.len).map(|k| train.state(k)[j]).collect();
+        wb.swing_noise = whitebox::noise_std(&swing);
+    }
     let mut model = named(model, states, inputs)?;
     whitebox::apply_offset(&mut model, train, settings.offset)?;
     Ok(model)

@@ -253,6 +253,8 @@ pub fn model(
         length: params.l,
         frequency_hz,
         friction: params.c,
+        links: None,
+        swing_noise: None,
     });
     Ok(out)
 }
@@ -296,9 +298,46 @@ pub fn apply_offset(
     Ok(())
 }
 
+/// Standard deviation of white noise on a smooth `signal`, from its third differences: white
+/// noise of std σ gives third differences of std σ·√20 (weights 1, −3, 3, −1), while a swing
+/// sampled well above its frequency contributes little. The median absolute difference
+/// (over 0.6745) keeps the transients of a manoeuvre out; `None` for fewer than 8 samples.
+pub fn noise_std(signal: &[f64]) -> Option<f64> {
+    if signal.len() < 8 {
+        return None;
+    }
+    let mut d: Vec<f64> = signal
+        .windows(4)
+        .map(|w| (w[3] - 3.0 * w[2] + 3.0 * w[1] - w[0]).abs())
+        .collect();
+    let mid = d.len() / 2;
+    let (_, median, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
+    let sigma = *median / 0.674_489_75 / 20f64.sqrt();
+    sigma.is_finite().then_some(sigma)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn noise_std_recovers_white_noise_on_a_swing() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        for sigma in [0.0005, 0.005] {
+            // A 1 Hz, 5° swing at 0.03 s plus uniform noise of std σ (half-width σ√3).
+            let x: Vec<f64> = (0..10_000)
+                .map(|k| {
+                    let t = 0.03 * k as f64;
+                    0.087 * (std::f64::consts::TAU * t).sin()
+                        + sigma * 3f64.sqrt() * rng.random_range(-1.0..1.0)
+                })
+                .collect();
+            let est = noise_std(&x).unwrap();
+            assert!((est / sigma - 1.0).abs() < 0.15, "{est} vs {sigma}");
+        }
+        assert_eq!(noise_std(&[0.0; 5]), None);
+    }
 
     #[test]
     fn fft_matches_direct_dft() {

@@ -1,0 +1,464 @@
+//! The payload's links, from how the swing answers the vehicle's motion.
+//!
+//! A payload hung as a double pendulum (point mass m₁ at l₁ below the vehicle, m₂ at l₂
+//! below m₁) from a vehicle accelerating horizontally by `a` answers, linearised, with the
+//! upper link's angle
+//!
+//! ```text
+//! θ₁/a = −(γ s² + 1/g) / (α s⁴ + β s² + 1),
+//! α = l₁l₂ / ((1+μ) g²),  β = (l₁+l₂) / g,  γ = l₂ / ((1+μ) g²),  μ = m₂/m₁,
+//! ```
+//!
+//! whatever holds the vehicle (PX4's loops, an MPC): the vehicle's acceleration is the
+//! forcing. A single pendulum is α = γ = 0, β = l/g. The three coefficients give the three
+//! unknowns: l₁ = α/γ, l₂ = βg − l₁, 1 + μ = l₂/(γg²). The swing sensor sees only the upper
+//! link, so the white-box (one FFT peak) takes a double pendulum for a single one of some
+//! length in between; its lower mode, which an MPC on a delay-coordinate model can excite
+//! unseen, is what this finds.
+//!
+//! The equation is fitted in continuous time through a state-variable filter λ⁴/(s+λ)⁴
+//! (derivatives of the filtered signals, not of noisy data), with terms for the links'
+//! damping and a constant for the sensor's bias. Plain least squares is biased: the swing
+//! sensor's noise is in the regressors, and it pulls α and γ to zero. So the fit is
+//! refined by instrumental variables (Young's refined IV, simplified): the swing of the
+//! current estimate, simulated noise-free from the measured velocity, stands in for the
+//! measured one in the regressors, until the estimate settles. Started from a few physical
+//! guesses; the double pendulum is reported when it is physical and its simulated swing
+//! matches the measured one clearly better than the single pendulum's does.
+
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+
+use crate::control::riccati::expm;
+use crate::plant::GRAVITY;
+
+/// Settings of [`double_pendulum`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LinkSettings {
+    /// Corner λ of the state-variable filter [rad/s]: above the swing modes of links of
+    /// 0.2 m and longer (≤ 9 rad/s), below the sensor noise.
+    pub filter_rate: f64,
+    /// Refined-IV iterations from each start.
+    pub iterations: usize,
+    /// Leading span left out while the filters settle [s].
+    pub settle: f64,
+    /// Damping ratio of the instrument model's modes (the simulated swing must not ring
+    /// forever on a start that is off).
+    pub instrument_damping: f64,
+    /// Smallest relative drop of the swing's simulation error that adopts the double
+    /// pendulum over the single one.
+    pub min_improvement: f64,
+    /// Largest mass ratio m₂/m₁ taken as physical.
+    pub max_mass_ratio: f64,
+}
+
+impl Default for LinkSettings {
+    fn default() -> Self {
+        Self {
+            filter_rate: 10.0,
+            iterations: 10,
+            settle: 5.0,
+            instrument_damping: 0.05,
+            min_improvement: 0.1,
+            max_mass_ratio: 10.0,
+        }
+    }
+}
+
+/// A double pendulum found in the swing.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DoublePendulum {
+    /// Length of the upper link l₁ [m].
+    pub length: f64,
+    /// Length of the lower link l₂ [m].
+    pub length2: f64,
+    /// Mass ratio μ = m₂/m₁ of the lower to the upper mass.
+    pub mass_ratio: f64,
+    /// Error of the double pendulum's simulated swing over the single pendulum's (RMS).
+    pub error_ratio: f64,
+}
+
+/// Coefficients of the filtered equation: [α, δ₃, β, δ₁, γ, bias] (δ: damping terms).
+type Coefficients = [f64; 6];
+
+/// First-order-hold discretisation of x' = A x + b u (one input) at `dt`: (Φ, Γ₁, Γ₂) with
+/// x_{k+1} = Φ x_k + Γ₁ u_k + Γ₂ (u_{k+1} − u_k), exact for an input linear between samples.
+/// A zero-order hold would lag the filtered signals by half a sample against the
+/// feedthrough of the fourth derivative.
+fn foh(a: &DMatrix<f64>, b: &DMatrix<f64>, dt: f64) -> (DMatrix<f64>, DVector<f64>, DVector<f64>) {
+    let n = a.nrows();
+    let mut m = DMatrix::<f64>::zeros(n + 2, n + 2);
+    m.view_mut((0, 0), (n, n)).copy_from(&(a * dt));
+    m.view_mut((0, n), (n, 1)).copy_from(&(b * dt));
+    m[(n, n + 1)] = 1.0;
+    let e = expm(&m).unwrap_or_else(|| DMatrix::from_element(n + 2, n + 2, f64::NAN));
+    (
+        e.view((0, 0), (n, n)).into_owned(),
+        e.column(n).rows(0, n).into_owned(),
+        e.column(n + 1).rows(0, n).into_owned(),
+    )
+}
+
+/// s^k·λ⁴/(s+λ)⁴ applied to `u` (sampled every `dt`, linear between samples) for k = 0…4:
+/// `out[k][i]`.
+fn filtered(u: &[f64], dt: f64, lambda: f64) -> [Vec<f64>; 5] {
+    let c = [
+        lambda.powi(4),
+        4.0 * lambda.powi(3),
+        6.0 * lambda.powi(2),
+        4.0 * lambda,
+    ];
+    let mut a = DMatrix::<f64>::zeros(4, 4);
+    for i in 0..3 {
+        a[(i, i + 1)] = 1.0;
+    }
+    for (j, cj) in c.iter().enumerate() {
+        a[(3, j)] = -cj;
+    }
+    let mut b = DMatrix::<f64>::zeros(4, 1);
+    b[(3, 0)] = c[0];
+    let (phi, g1, g2) = foh(&a, &b, dt);
+    let mut x = DVector::<f64>::zeros(4);
+    let mut out: [Vec<f64>; 5] = Default::default();
+    for o in out.iter_mut() {
+        o.reserve(u.len());
+    }
+    for (i, &uk) in u.iter().enumerate() {
+        for k in 0..4 {
+            out[k].push(x[k]);
+        }
+        out[4].push(c[0] * uk - (0..4).map(|j| c[j] * x[j]).sum::<f64>());
+        let next = u.get(i + 1).copied().unwrap_or(uk);
+        x = &phi * &x + &g1 * uk + &g2 * (next - uk);
+    }
+    out
+}
+
+/// Noise-free swing of the coefficients' model, driven by the measured velocity `v`: the
+/// modes of α s⁴ + β s² + 1 with `damping`, numerator −(γ s³ + s/g) acting on v.
+fn simulate(coef: &Coefficients, v: &[f64], dt: f64, damping: f64) -> Option<Vec<f64>> {
+    let [alpha, _, beta, _, gamma, _] = *coef;
+    // Denominator as a monic quartic: a single pendulum (α = 0) is one mode of β s² + 1.
+    let (den, num): (Vec<f64>, Vec<f64>) = if alpha.abs() < 1e-12 {
+        if beta <= 0.0 {
+            return None;
+        }
+        let w = (1.0 / beta).sqrt();
+        (vec![w * w, 2.0 * damping * w], vec![0.0, -w * w / GRAVITY])
+    } else {
+        let disc = beta * beta - 4.0 * alpha;
+        if alpha < 0.0 || beta <= 0.0 || disc <= 0.0 {
+            return None;
+        }
+        let w1 = ((beta - disc.sqrt()) / (2.0 * alpha)).sqrt();
+        let w2 = ((beta + disc.sqrt()) / (2.0 * alpha)).sqrt();
+        let (p1, p2) = ([w1 * w1, 2.0 * damping * w1], [w2 * w2, 2.0 * damping * w2]);
+        // (s² + p1[1] s + p1[0])(s² + p2[1] s + p2[0]) = s⁴ + d3 s³ + d2 s² + d1 s + d0
+        let den = vec![
+            p1[0] * p2[0],
+            p1[1] * p2[0] + p1[0] * p2[1],
+            p1[0] + p2[0] + p1[1] * p2[1],
+            p1[1] + p2[1],
+        ];
+        // α s⁴ + β s² + 1 = α (s² + w1²)(s² + w2²): dividing by α scales the numerator.
+        (
+            den,
+            vec![0.0, -1.0 / (GRAVITY * alpha), 0.0, -gamma / alpha],
+        )
+    };
+    let n = den.len();
+    let mut a = DMatrix::<f64>::zeros(n, n);
+    for i in 0..n - 1 {
+        a[(i, i + 1)] = 1.0;
+    }
+    for (j, dj) in den.iter().enumerate() {
+        a[(n - 1, j)] = -dj;
+    }
+    let mut b = DMatrix::<f64>::zeros(n, 1);
+    b[(n - 1, 0)] = 1.0;
+    let (phi, g1, g2) = foh(&a, &b, dt);
+    if phi.iter().any(|x| !x.is_finite()) {
+        return None;
+    }
+    let mut x = DVector::<f64>::zeros(n);
+    let mut out = Vec::with_capacity(v.len());
+    for (i, &vk) in v.iter().enumerate() {
+        out.push(num.iter().zip(x.iter()).map(|(c, xi)| c * xi).sum::<f64>());
+        let next = v.get(i + 1).copied().unwrap_or(vk);
+        x = &phi * &x + &g1 * vk + &g2 * (next - vk);
+    }
+    out.iter().all(|y| y.is_finite()).then_some(out)
+}
+
+/// The filtered data of one axis: regressors and target of the equation.
+struct Filtered {
+    theta: [Vec<f64>; 5],
+    v: [Vec<f64>; 5],
+    from: usize,
+}
+
+impl Filtered {
+    /// Target −(F θ + F a / g), a = s v.
+    fn target(&self, i: usize) -> f64 {
+        -(self.theta[0][i] + self.v[1][i] / GRAVITY)
+    }
+}
+
+/// Columns of the regression for the model with `double` (α, δ₃, β, δ₁, γ, bias) or without
+/// (β, δ₁, bias) the lower link, from filtered swings `th` and filtered velocity `fv`.
+fn row(th: &[Vec<f64>; 5], fv: &[Vec<f64>; 5], i: usize, double: bool) -> Vec<f64> {
+    if double {
+        vec![th[4][i], th[3][i], th[2][i], th[1][i], fv[3][i], 1.0]
+    } else {
+        vec![th[2][i], th[1][i], 1.0]
+    }
+}
+
+/// One IV step: solve Zᵀ X c = Zᵀ y with instruments from `inst` (filtered simulated swing).
+fn iv_step(f: &Filtered, inst: &[Vec<f64>; 5], double: bool) -> Option<Vec<f64>> {
+    let k = if double { 6 } else { 3 };
+    let mut zx = DMatrix::<f64>::zeros(k, k);
+    let mut zy = DVector::<f64>::zeros(k);
+    for i in f.from..f.theta[0].len() {
+        let x = row(&f.theta, &f.v, i, double);
+        let z = row(inst, &f.v, i, double);
+        let y = f.target(i);
+        for r in 0..k {
+            for c in 0..k {
+                zx[(r, c)] += z[r] * x[c];
+            }
+            zy[r] += z[r] * y;
+        }
+    }
+    let sol = zx.lu().solve(&zy)?;
+    sol.iter()
+        .all(|x| x.is_finite())
+        .then(|| sol.iter().copied().collect())
+}
+
+/// Full coefficients from a solution of the double (6) or single (3) regression.
+fn coefficients(sol: &[f64]) -> Coefficients {
+    match sol.len() {
+        6 => [sol[0], sol[1], sol[2], sol[3], sol[4], sol[5]],
+        _ => [0.0, 0.0, sol[0], sol[1], 0.0, sol[2]],
+    }
+}
+
+/// Physical links of coefficients: (l₁, l₂, μ), or `None`.
+fn links(coef: &Coefficients, max_mass_ratio: f64) -> Option<(f64, f64, f64)> {
+    let [alpha, _, beta, _, gamma, _] = *coef;
+    if !(alpha > 0.0 && gamma > 0.0 && beta > 0.0) {
+        return None;
+    }
+    let l1 = alpha / gamma;
+    let l2 = beta * GRAVITY - l1;
+    let mu = l2 / (gamma * GRAVITY * GRAVITY) - 1.0;
+    (l1 > 0.0 && l2 > 0.0 && mu > 0.0 && mu <= max_mass_ratio).then_some((l1, l2, mu))
+}
+
+/// Coefficients of physical links (inverse of [`links`]).
+fn from_links(l1: f64, l2: f64, mu: f64) -> Coefficients {
+    let g2 = GRAVITY * GRAVITY;
+    [
+        l1 * l2 / ((1.0 + mu) * g2),
+        0.0,
+        (l1 + l2) / GRAVITY,
+        0.0,
+        l2 / ((1.0 + mu) * g2),
+        0.0,
+    ]
+}
+
+/// Refined IV from `start`: the settled solution, or `None` when the model leaves the
+/// physical range on the way.
+fn refine(
+    f: &Filtered,
+    v: &[f64],
+    dt: f64,
+    start: Coefficients,
+    double: bool,
+    s: &LinkSettings,
+) -> Option<Coefficients> {
+    let mut coef = start;
+    for _ in 0..s.iterations {
+        let sim = simulate(&coef, v, dt, s.instrument_damping)?;
+        let inst = filtered(&sim, dt, s.filter_rate);
+        let next = coefficients(&iv_step(f, &inst, double)?);
+        let change = (next[0] - coef[0]).abs() / next[0].abs().max(1e-12)
+            + (next[2] - coef[2]).abs() / next[2].abs().max(1e-12);
+        coef = next;
+        if change < 1e-4 {
+            break;
+        }
+    }
+    Some(coef)
+}
+
+/// RMS error of the coefficients' simulated swing against the measured one (each with its
+/// mean removed: the sensor's bias and a steady wind's lean are not the links').
+fn simulation_error(
+    coef: &Coefficients,
+    v: &[f64],
+    theta: &[f64],
+    dt: f64,
+    from: usize,
+    damping: f64,
+) -> f64 {
+    let sim = match simulate(coef, v, dt, damping) {
+        Some(s) => s,
+        None => return f64::INFINITY,
+    };
+    let n = (theta.len() - from) as f64;
+    let mt = theta[from..].iter().sum::<f64>() / n;
+    let ms = sim[from..].iter().sum::<f64>() / n;
+    (theta[from..]
+        .iter()
+        .zip(&sim[from..])
+        .map(|(t, s)| ((t - mt) - (s - ms)).powi(2))
+        .sum::<f64>()
+        / n)
+        .sqrt()
+}
+
+/// The double pendulum in the swing `theta` [rad] of the upper link, answering the
+/// vehicle's velocity `v` [m/s] on the same axis, both sampled every `dt` [s]; `None`
+/// when a single pendulum explains the swing as well (or the data cannot say).
+pub fn double_pendulum(
+    v: &[f64],
+    theta: &[f64],
+    dt: f64,
+    settings: &LinkSettings,
+) -> Option<DoublePendulum> {
+    if !dt.is_finite() || dt <= 0.0 || v.len() != theta.len() {
+        return None;
+    }
+    let from = (settings.settle / dt).ceil() as usize;
+    if v.len() < from.saturating_add(100) {
+        return None;
+    }
+    if v.iter().chain(theta).any(|x| !x.is_finite()) {
+        return None;
+    }
+    let f = Filtered {
+        theta: filtered(theta, dt, settings.filter_rate),
+        v: filtered(v, dt, settings.filter_rate),
+        from,
+    };
+    // The single pendulum first: least squares (its bias is small, one mode of one
+    // length), refined by IV.
+    let ls = iv_step(&f, &f.theta, false)?;
+    let single = refine(&f, v, dt, coefficients(&ls), false, settings)?;
+    let single_error = simulation_error(&single, v, theta, dt, from, settings.instrument_damping);
+    let l = single[2] * GRAVITY;
+    if !(l > 0.0 && single_error.is_finite()) {
+        return None;
+    }
+    let mut best: Option<(f64, (f64, f64, f64))> = None;
+    for (r1, r2, mu) in [
+        (0.8, 0.4, 0.3),
+        (0.6, 0.6, 0.3),
+        (0.9, 0.2, 0.2),
+        (0.5, 0.8, 1.0),
+        (0.8, 0.6, 1.0),
+        (0.4, 0.4, 0.3),
+    ] {
+        let Some(coef) = refine(&f, v, dt, from_links(r1 * l, r2 * l, mu), true, settings) else {
+            continue;
+        };
+        let Some(phys) = links(&coef, settings.max_mass_ratio) else {
+            continue;
+        };
+        let err = simulation_error(&coef, v, theta, dt, from, settings.instrument_damping);
+        if best.is_none_or(|(e, _)| err < e) {
+            best = Some((err, phys));
+        }
+    }
+    let (err, (length, length2, mass_ratio)) = best?;
+    let error_ratio = err / single_error;
+    (error_ratio <= 1.0 - settings.min_improvement).then_some(DoublePendulum {
+        length,
+        length2,
+        mass_ratio,
+        error_ratio,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn filter_derivatives_of_a_sine_match_the_closed_form() {
+        // Steady state of s^k λ⁴/(s+λ)⁴ on sin(ωt): gain ω^k λ⁴/(λ²+ω²)², phase k·90° − 4·atan(ω/λ).
+        let (dt, w, lam) = (0.001, 2.0, 10.0);
+        let u: Vec<f64> = (0..20_000).map(|i| (w * i as f64 * dt).sin()).collect();
+        let out = filtered(&u, dt, lam);
+        let i = 19_000;
+        let t = i as f64 * dt;
+        for (k, o) in out.iter().enumerate() {
+            let gain = w.powi(k as i32) * lam.powi(4) / (lam * lam + w * w).powi(2);
+            let phase = k as f64 * std::f64::consts::FRAC_PI_2 - 4.0 * (w / lam).atan();
+            let want = gain * (w * t + phase).sin();
+            assert!(
+                (o[i] - want).abs() < 1e-4 * gain.max(1.0),
+                "k={k}: {} vs {want}",
+                o[i]
+            );
+        }
+    }
+
+    /// Velocity and swing (N) of `seconds` of the builtin training flight with `payload`,
+    /// every third sample of the 0.01 s trace (0.03 s, as identification resamples).
+    fn training(payload: crate::plant::PayloadParams, swing_std: f64) -> (Vec<f64>, Vec<f64>) {
+        use crate::sim::{Scenario, Simulator};
+        let mut sc = Scenario::builtin("training").unwrap();
+        sc.duration = 300.0;
+        sc.payload = payload;
+        sc.noise.swing_std = swing_std;
+        let trace = Simulator::run(sc).unwrap();
+        let pick = |n: &str| {
+            trace
+                .column(n)
+                .unwrap()
+                .iter()
+                .step_by(3)
+                .copied()
+                .collect()
+        };
+        (pick("vn"), pick("swing_n"))
+    }
+
+    #[test]
+    fn a_double_pendulum_is_found_with_its_links_and_a_single_one_is_not() {
+        use crate::plant::{PayloadKind, PayloadParams};
+        let double = PayloadParams {
+            kind: PayloadKind::Double,
+            mass: 0.4,
+            length: 0.8,
+            mass2: 0.11,
+            length2: 0.6,
+            ..PayloadParams::default()
+        };
+        for std in [0.0, 0.005] {
+            let (v, th) = training(double.clone(), std);
+            let d = double_pendulum(&v, &th, 0.03, &LinkSettings::default())
+                .unwrap_or_else(|| panic!("no second link found at noise {std}"));
+            assert!((d.length - 0.8).abs() < 0.08, "{d:?}");
+            assert!((d.length2 - 0.6).abs() < 0.06, "{d:?}");
+            assert!((d.mass_ratio - 0.275).abs() < 0.05, "{d:?}");
+        }
+        for length in [0.5, 1.5] {
+            let single = PayloadParams {
+                mass: 0.3,
+                length,
+                ..PayloadParams::default()
+            };
+            let (v, th) = training(single, 0.005);
+            let d = double_pendulum(&v, &th, 0.03, &LinkSettings::default());
+            assert!(
+                d.is_none(),
+                "a single pendulum of {length} m taken for {d:?}"
+            );
+        }
+    }
+}
