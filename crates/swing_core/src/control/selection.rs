@@ -6,9 +6,9 @@
 //! white-box model of the same flight in closed loop — as identified, and with each of
 //! `vehicle_drag` added — behind each of `input_lags`: hover, a step, hold. The stable rows
 //! of the search come first, in NMAE order; with a twin, the rows it did not screen (worse
-//! than a stable p of their q) follow, each screened when its turn comes. The first candidate whose every
-//! run stays within `bounds` is selected; with none passing, the one that misses its bounds
-//! least (largest ratio to a bound), and its diagnostics say so.
+//! than a stable p of their q) follow, each screened when its turn comes. The first
+//! candidate whose every run stays within `bounds` is selected; with none passing, the one
+//! that misses its bounds least (largest ratio to a bound), and its diagnostics say so.
 //!
 //! With a [`TwinPlant`] the candidate's MPC first flies the same step on the vehicle's
 //! twin (the nonlinear simulator under PX4's cascade with the white-box payload and the
@@ -347,14 +347,19 @@ pub fn select_for_control(
     let mut rows: Vec<_> = search
         .table
         .iter()
-        .filter(|c| c.nmae.is_finite() && (c.stable == Some(true) || twin.is_some()))
+        .filter(|c| {
+            c.nmae.is_finite()
+                && match c.stable {
+                    Some(stable) => stable,
+                    None => twin.is_some(),
+                }
+        })
         .collect();
     rows.sort_by(|a, b| {
         (a.stable != Some(true))
             .cmp(&(b.stable != Some(true)))
             .then(a.nmae.total_cmp(&b.nmae))
     });
-    rows.retain(|c| c.stable != Some(false));
     // The search's stages can score the same (q, p) twice.
     let mut seen = std::collections::HashSet::new();
     rows.retain(|c| seen.insert((c.delays, c.rank)));
