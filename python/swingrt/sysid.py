@@ -273,10 +273,14 @@ def select_for_control(
     that vehicle carrying the white-box payload (both links when the swing shows a second
     one, ``diagnostics['whitebox']['links']``), with the flight's swing-sensor noise, in still
     air, and must settle within ``twin_bounds`` (``settle`` [s] after the step,
-    ``final_error`` as a fraction of it) before the linear plants are flown; of those that
-    settle, the first whose swing excess stays within ``swing_vs_pid`` of PX4's own on the
-    same step (or below ``swing_excess_min`` deg·s) is taken, else the one that swings
-    least. Without a white-box (a model-only check) the twin is not flown."""
+    ``final_error`` as a fraction of it) before the linear plants are flown. One that
+    settles there too then holds the step on the twin for 60 s, with the noise and without:
+    what the noise alone does to its velocity (``wander``, the RMS of the 2 s mean
+    difference) and its largest error over the last 20 s without noise (``late_error``: a
+    slowly growing oscillation) are bounded, as fractions of the step. Of those that settle,
+    the first whose swing excess stays within ``swing_vs_pid`` of PX4's own on the same step
+    (or below ``swing_excess_min`` deg·s) is taken, else the one that swings least. Without
+    a white-box (a model-only check) the twin is not flown."""
     if result.search is None:
         raise ConfigError("result: not from a search (no candidates to check)", field="result")
     s = identify_settings(**{**result.settings, **settings})

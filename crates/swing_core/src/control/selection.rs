@@ -15,7 +15,10 @@
 //! flight's sensor noise) and must settle there within `twin_bounds`; only then is it
 //! flown on the linear plants. The linear check covers drag and input lags the twin does
 //! not vary; the twin covers the attitude loop, the limits and the nonlinearity the linear
-//! plants lack. A candidate that settles everywhere must also damp the swing: its twin
+//! plants lack. A candidate that settles on both then holds the step on the twin for a
+//! minute, with the noise and without: what the noise alone does to the velocity, and a
+//! slowly growing oscillation, are bounded too (`TwinHold`). A candidate that settles
+//! everywhere must also damp the swing: its twin
 //! swing excess within a fraction of PX4's own on the same step. When none does, the
 //! settled candidate that swings least is taken rather than the first that settled.
 
@@ -24,7 +27,7 @@ use serde_json::json;
 
 use crate::config::{finite, non_negative, positive, ConfigError};
 use crate::control::check::{step_check_with, StepCheck, StepCheckSettings};
-use crate::control::twin::{TwinFlight, TwinPlant};
+use crate::control::twin::{TwinFlight, TwinHold, TwinPlant};
 use crate::control::{ControlError, MpcController, MpcSettings};
 use crate::sysid::pipeline::{self, candidate_row};
 use crate::sysid::search::SearchResult;
@@ -75,11 +78,15 @@ pub struct TwinBounds {
     /// Largest |v − setpoint| over the last second, as a fraction of the step: the twin has
     /// no noise and no wind, so an offset-free MPC ends on the setpoint.
     pub final_error: f64,
-    /// Largest wander of the velocity over the hold (`TwinFlight::wander`: 2 s mean error),
-    /// as a fraction of the step, or PX4's own on the same step if that is larger (its
-    /// velocity integrator still creeps): the twin flies with the flight's swing-sensor
-    /// noise, and an MPC that turns it into velocity wanders off the setpoint in flight.
+    /// Largest wander of the velocity over the hold flight (`TwinHold::wander`: the RMS of
+    /// the 2 s mean of what the flight's swing-sensor noise, fed through the MPC, moved
+    /// it), as a fraction of the step: an MPC that turns the noise into velocity wanders
+    /// off the setpoint in flight.
     pub wander: f64,
+    /// Largest |v − setpoint| late in the hold flight without noise (`TwinHold::late_error`),
+    /// as a fraction of the step: a loop that slowly grows an oscillation settles on the
+    /// step flight and leaves the setpoint later.
+    pub late_error: f64,
     /// Largest swing excess (`TwinFlight::swing_excess`) as a fraction of PX4's alone on
     /// the same step: an MPC that moves the vehicle without damping the payload swings as
     /// PX4 does.
@@ -99,6 +106,7 @@ impl Default for TwinBounds {
             settle: 6.0,
             final_error: 0.005,
             wander: 0.005,
+            late_error: 0.01,
             swing_vs_pid: 0.3,
             swing_excess_min: 1.0,
         }
@@ -106,23 +114,17 @@ impl Default for TwinBounds {
 }
 
 impl TwinBounds {
-    /// The largest wander admitted, given PX4's own flight `pid` of the same step.
-    pub fn wander_bound(&self, pid: &TwinFlight) -> f64 {
-        if pid.wander.is_finite() {
-            self.wander.max(pid.wander)
-        } else {
-            self.wander
-        }
-    }
-
-    /// Whether a twin flight is within these bounds (the wander's given PX4's own flight
-    /// `pid`) and the linear `bounds`' overshoot.
-    pub fn admit(&self, f: &TwinFlight, pid: &TwinFlight, bounds: &CheckBounds) -> bool {
+    /// Whether a twin step flight is within these bounds and the linear `bounds`' overshoot.
+    pub fn admit(&self, f: &TwinFlight, bounds: &CheckBounds) -> bool {
         f.settle <= self.settle
             && f.check.final_error <= self.final_error
-            && f.wander <= self.wander_bound(pid)
             && f.check.overshoot <= bounds.overshoot
             && f.check.hold_drift <= bounds.hold_drift
+    }
+
+    /// Whether a twin hold flight is within these bounds.
+    pub fn holds(&self, h: &TwinHold) -> bool {
+        h.wander <= self.wander && h.late_error <= self.late_error
     }
 
     /// The largest swing excess admitted, given PX4's own flight `pid` of the same step.
@@ -136,10 +138,14 @@ impl TwinBounds {
     }
 
     /// How far a twin flight misses: the largest ratio of a figure to its bound.
-    pub fn miss(&self, f: &TwinFlight, pid: &TwinFlight, bounds: &CheckBounds) -> f64 {
+    /// The hold flight `h` counts when it was flown.
+    pub fn miss(&self, f: &TwinFlight, h: Option<&TwinHold>, bounds: &CheckBounds) -> f64 {
+        let hold = h.map_or(0.0, |h| {
+            (h.wander / self.wander).max(h.late_error / self.late_error)
+        });
         (f.settle / self.settle)
             .max(f.check.final_error / self.final_error)
-            .max(f.wander / self.wander_bound(pid))
+            .max(hold)
             .max(f.check.overshoot / bounds.overshoot)
             .max(f.check.hold_drift / bounds.hold_drift)
     }
@@ -217,6 +223,7 @@ impl SelectionSettings {
         positive("twin_bounds.settle", self.twin_bounds.settle)?;
         positive("twin_bounds.final_error", self.twin_bounds.final_error)?;
         positive("twin_bounds.wander", self.twin_bounds.wander)?;
+        positive("twin_bounds.late_error", self.twin_bounds.late_error)?;
         non_negative("twin_bounds.swing_vs_pid", self.twin_bounds.swing_vs_pid)?;
         non_negative(
             "twin_bounds.swing_excess_min",
@@ -245,19 +252,21 @@ pub struct CheckedCandidate {
     pub worst: StepCheck,
     /// The twin step flight, when a twin was given.
     pub twin: Option<TwinFlight>,
+    /// The twin hold flight, when the candidate settled on the step flight and the linear
+    /// plants.
+    pub hold: Option<TwinHold>,
 }
 
 impl CheckedCandidate {
     /// How far the candidate misses its bounds: the twin's miss first (a candidate that
     /// fails on the twin ranks behind every one that settles there), then the linear one.
-    fn miss(&self, settings: &SelectionSettings, pid: Option<&TwinFlight>) -> (f64, f64) {
-        let twin = match (self.twin, pid) {
-            (Some(f), Some(pid)) => settings
+    fn miss(&self, settings: &SelectionSettings) -> (f64, f64) {
+        let twin = self.twin.map_or(0.0, |f| {
+            settings
                 .twin_bounds
-                .miss(&f, pid, &settings.bounds)
-                .max(1.0),
-            _ => 0.0,
-        };
+                .miss(&f, self.hold.as_ref(), &settings.bounds)
+                .max(1.0)
+        });
         let linear = if self.worst.final_error.is_nan() {
             f64::INFINITY
         } else {
@@ -384,13 +393,11 @@ pub fn select_for_control(
             }
         }
         let flight = match twin {
-            Some(tw) => Some(tw.fly(MpcController::new(&model, mpc_settings.clone())?)?),
+            Some(tw) => Some(tw.fly(&model, mpc_settings)?),
             None => None,
         };
         let on_twin = match (twin, &flight) {
-            (Some(tw), Some(f)) => settings
-                .twin_bounds
-                .admit(f, tw.pid_flight(), &settings.bounds),
+            (Some(_), Some(f)) => settings.twin_bounds.admit(f, &settings.bounds),
             _ => true,
         };
         let worst = if on_twin {
@@ -402,7 +409,15 @@ pub fn select_for_control(
                 hold_drift: f64::NAN,
             }
         };
-        let settled = on_twin && settings.bounds.admit(&worst);
+        let mut settled = on_twin && settings.bounds.admit(&worst);
+        // The long hold, flown twice with noise, only for candidates that settle.
+        let hold = match twin {
+            Some(tw) if settled => Some(tw.hold(&model, mpc_settings)?),
+            _ => None,
+        };
+        if let Some(h) = &hold {
+            settled = settings.twin_bounds.holds(h);
+        }
         let damps = match (twin, &flight) {
             (Some(tw), Some(f)) => settings.twin_bounds.damps(f, tw.pid_flight()),
             _ => true,
@@ -415,6 +430,7 @@ pub fn select_for_control(
             settled,
             worst,
             twin: flight,
+            hold,
         });
         if settled && damps {
             chosen = Some(model);
@@ -438,9 +454,8 @@ pub fn select_for_control(
                 let least = checked
                     .iter()
                     .min_by(|a, b| {
-                        let pid = twin.map(TwinPlant::pid_flight);
-                        let (ta, la) = a.miss(settings, pid);
-                        let (tb, lb) = b.miss(settings, pid);
+                        let (ta, la) = a.miss(settings);
+                        let (tb, lb) = b.miss(settings);
                         ta.total_cmp(&tb).then(la.total_cmp(&lb))
                     })
                     .ok_or_else(|| {
@@ -494,6 +509,7 @@ pub fn select_for_control(
                 "final_error": c.worst.final_error,
                 "hold_drift": c.worst.hold_drift,
                 "twin": c.twin.as_ref().map(flight_json),
+                "hold": c.hold.map(|h| json!({"wander": h.wander, "late_error": h.late_error})),
             })).collect::<Vec<_>>(),
         }),
     );
@@ -512,6 +528,5 @@ fn flight_json(f: &TwinFlight) -> serde_json::Value {
         "final_error": f.check.final_error,
         "hold_drift": f.check.hold_drift,
         "swing_excess": f.swing_excess,
-        "wander": f.wander,
     })
 }

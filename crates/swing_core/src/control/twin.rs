@@ -188,6 +188,11 @@ pub const TWIN_CHECK_STEP_AT: f64 = 2.0;
 pub const SETTLE_BAND: f64 = 0.05;
 /// Span at the end of a twin step flight over which the final error is averaged [s].
 const FINAL_SPAN: f64 = 1.0;
+/// Length of the twin's hold flight (the same step, held) [s]: long enough for a slow
+/// growth to show, and for the 2 s means of the velocity to average over many noise draws.
+pub const TWIN_HOLD_SECONDS: f64 = 60.0;
+/// Span at the end of the hold flight over which the late error is taken [s].
+const LATE_SPAN: f64 = 20.0;
 /// Start of the span over which the velocity's wander is measured [s].
 pub const WANDER_FROM: f64 = 10.0;
 /// Length of the blocks whose mean velocity error is the wander [s]: a flight's
@@ -197,7 +202,8 @@ pub const WANDER_SPAN: f64 = 2.0;
 /// The twin as a plant of the control-relevant selection: a candidate's MPC flies a
 /// velocity step (hover, step at [`TWIN_CHECK_STEP_AT`], hold) on swingrt's nonlinear
 /// simulator of the vehicle under PX4's cascade, carrying the payload of the flight's
-/// white-box (a single pendulum), in still air and without sensor noise.
+/// white-box (both links when the swing shows a second), in still air, with the flight's
+/// swing-sensor noise; [`TwinPlant::hold`] holds the step for a minute.
 ///
 /// The linear check flies a candidate on a linear pendulum behind a first-order lag. What
 /// it cannot see and the twin can: the attitude loop's lag and the cascade's tilt and
@@ -228,11 +234,32 @@ pub struct TwinFlight {
     /// needs; what is left is swing that a damping controller removes (`metrics.csv`'s
     /// `swing_excess_iae_deg_s`, on the twin).
     pub swing_excess: f64,
-    /// RMS over the hold of the velocity's error averaged over the trailing [`WANDER_SPAN`]
-    /// (from [`WANDER_FROM`] on), as a fraction of the step: how far the flight's sensor
-    /// noise, fed through the MPC, moves the vehicle once it has settled, at the time scale
-    /// of a flight's steady-state error (the mean over its last 2 s).
+}
+
+/// Figures of the twin's hold flight: the step held for [`TWIN_HOLD_SECONDS`], flown with
+/// the flight's sensor noise and again without.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TwinHold {
+    /// RMS (from [`WANDER_FROM`] on) of the trailing [`WANDER_SPAN`] mean of the velocity's
+    /// difference between the two flights, as a fraction of the step, worst over the axes:
+    /// how far the sensor noise, fed through the MPC, moves the vehicle once it has settled,
+    /// at the time scale of a flight's steady-state error (the mean over its last 2 s).
+    /// 0 without noise; PX4 alone does not read the swing and has none.
     pub wander: f64,
+    /// Largest |v − setpoint| over the last 20 s of the flight without noise, as a fraction
+    /// of the step: in still air a settled MPC stays on the setpoint, and one whose loop
+    /// slowly grows an oscillation (too slowly for the step flight to show) does not.
+    pub late_error: f64,
+}
+
+impl TwinHold {
+    /// The figures of a hold flight that diverged or was handed back to PX4.
+    pub fn diverged() -> Self {
+        Self {
+            wander: f64::INFINITY,
+            late_error: f64::INFINITY,
+        }
+    }
 }
 
 impl TwinFlight {
@@ -246,7 +273,6 @@ impl TwinFlight {
             },
             settle: f64::INFINITY,
             swing_excess: f64::INFINITY,
-            wander: f64::INFINITY,
         }
     }
 }
@@ -346,10 +372,82 @@ impl TwinPlant {
         &self.label
     }
 
-    /// Fly `mpc` (designed for this twin's axes) on the step; a diverged flight or one
-    /// handed back to PX4 (a tick that failed) gives [`TwinFlight::diverged`].
-    pub fn fly(&self, mpc: MpcController) -> Result<TwinFlight, ControlError> {
+    /// Fly the MPC of `model` with `settings` (designed for this twin's axes) on the step; a
+    /// diverged flight or one handed back to PX4 (a tick that failed) gives
+    /// [`TwinFlight::diverged`].
+    pub fn fly(
+        &self,
+        model: &LinearModel,
+        settings: &MpcSettings,
+    ) -> Result<TwinFlight, ControlError> {
+        match self.run(&self.scenario, model, settings)? {
+            Some(sim) => measure(&sim, self.step, self.axes),
+            None => Ok(TwinFlight::diverged()),
+        }
+    }
+
+    /// Fly the MPC of `model` with `settings` on the step held for [`TWIN_HOLD_SECONDS`],
+    /// with the sensor noise and, when there is some, again without it (the same draws
+    /// otherwise): what the noise alone does to the velocity, and whether the flight
+    /// without it stays on the setpoint.
+    pub fn hold(
+        &self,
+        model: &LinearModel,
+        settings: &MpcSettings,
+    ) -> Result<TwinHold, ControlError> {
+        let mut sc = self.scenario.clone();
+        sc.duration = TWIN_HOLD_SECONDS;
+        let Some(noisy) = self.run(&sc, model, settings)? else {
+            return Ok(TwinHold::diverged());
+        };
+        let clean = if sc.noise.swing_std > 0.0 {
+            sc.noise.swing_std = 0.0;
+            match self.run(&sc, model, settings)? {
+                Some(sim) => Some(sim),
+                None => return Ok(TwinHold::diverged()),
+            }
+        } else {
+            None
+        };
+        let t = column(&noisy, "t")?;
+        let late = t.partition_point(|&x| x < TWIN_HOLD_SECONDS - LATE_SPAN);
+        let mut out = TwinHold {
+            wander: 0.0,
+            late_error: 0.0,
+        };
+        for v_name in ["vn", "ve"].iter().take(self.axes) {
+            let v = column(&noisy, v_name)?;
+            let v0 = match &clean {
+                Some(c) => column(c, v_name)?,
+                None => v,
+            };
+            if v0.len() != v.len() {
+                return Err(ControlError::Model(
+                    "the twin's flights with and without noise differ in length".into(),
+                ));
+            }
+            out.wander = out.wander.max(wander(t, v, v0) / self.step.abs());
+            let late_error = v0[late..]
+                .iter()
+                .fold(0.0_f64, |a, x| a.max((x - self.step).abs()));
+            out.late_error = out.late_error.max(late_error / self.step.abs());
+        }
+        if !(out.wander.is_finite() && out.late_error.is_finite()) {
+            return Ok(TwinHold::diverged());
+        }
+        Ok(out)
+    }
+
+    /// `scenario` flown to its end by the MPC of `model`; `None` when it diverged or fell
+    /// back to PX4.
+    fn run(
+        &self,
+        scenario: &Scenario,
+        model: &LinearModel,
+        settings: &MpcSettings,
+    ) -> Result<Option<Simulator>, ControlError> {
         use super::SwingController;
+        let mpc = MpcController::new(model, settings.clone())?;
         if mpc.axes() != self.axes {
             return Err(ControlError::Model(format!(
                 "the twin flies {} axes, the controller {}",
@@ -357,30 +455,29 @@ impl TwinPlant {
                 mpc.axes()
             )));
         }
-        let mut sim = Simulator::new(self.scenario.clone()).map_err(sim_error)?;
+        let mut sim = Simulator::new(scenario.clone()).map_err(sim_error)?;
         // The check measures the control law, not the machine it runs on: no tick budget.
         sim.attach_controller(Box::new(mpc), 0.0, f64::MAX)
             .map_err(sim_error)?;
         match sim.run_to_end() {
             Ok(()) => {}
-            Err(SimError::Diverged { .. }) => return Ok(TwinFlight::diverged()),
+            Err(SimError::Diverged { .. }) => return Ok(None),
             Err(e) => return Err(sim_error(e)),
         }
-        if sim.fallback_reason().is_some() {
-            return Ok(TwinFlight::diverged());
-        }
-        measure(&sim, self.step, self.axes)
+        Ok(sim.fallback_reason().is_none().then_some(sim))
     }
+}
+
+/// The column `name` of the finished flight `sim`.
+fn column<'a>(sim: &'a Simulator, name: &str) -> Result<&'a [f64], ControlError> {
+    sim.trace()
+        .column(name)
+        .ok_or_else(|| ControlError::Model(format!("twin flight has no column {name}")))
 }
 
 /// Figures of the finished twin step flight `sim` (a `step` [m/s] on `axes` axes).
 fn measure(sim: &Simulator, step: f64, axes: usize) -> Result<TwinFlight, ControlError> {
-    let trace = sim.trace();
-    let column = |name: &str| {
-        trace
-            .column(name)
-            .ok_or_else(|| ControlError::Model(format!("twin flight has no column {name}")))
-    };
+    let column = |name: &str| column(sim, name);
     let t = column("t")?;
     let mut out = TwinFlight {
         check: StepCheck {
@@ -390,7 +487,6 @@ fn measure(sim: &Simulator, step: f64, axes: usize) -> Result<TwinFlight, Contro
         },
         settle: 0.0,
         swing_excess: 0.0,
-        wander: 0.0,
     };
     let after = t.partition_point(|&x| x < TWIN_CHECK_STEP_AT);
     let tail = t.partition_point(|&x| x < TWIN_CHECK_SECONDS - FINAL_SPAN);
@@ -413,27 +509,6 @@ fn measure(sim: &Simulator, step: f64, axes: usize) -> Result<TwinFlight, Contro
             Some(k) => t[after + k + 1] - TWIN_CHECK_STEP_AT,
         };
         out.settle = out.settle.max(settle);
-        // Trailing WANDER_SPAN means of the error, from WANDER_FROM + WANDER_SPAN on.
-        let start = t.partition_point(|&x| x < WANDER_FROM);
-        let mut window = std::collections::VecDeque::new();
-        let (mut sum, mut sq, mut count) = (0.0, 0.0, 0usize);
-        for k in start..v.len() {
-            window.push_back(k);
-            sum += v[k] - step;
-            while let Some(&j) = window.front() {
-                if t[k] - t[j] < WANDER_SPAN {
-                    break;
-                }
-                sum -= v[j] - step;
-                window.pop_front();
-            }
-            if t[k] >= WANDER_FROM + WANDER_SPAN {
-                sq += (sum / window.len() as f64).powi(2);
-                count += 1;
-            }
-        }
-        let rms = (sq / count.max(1) as f64).sqrt();
-        out.wander = out.wander.max(rms / step.abs());
         let swing = column(swing_name)?;
         let last = mean(&swing[tail..]);
         let (mut iae, mut signed) = (0.0, 0.0);
@@ -447,12 +522,35 @@ fn measure(sim: &Simulator, step: f64, axes: usize) -> Result<TwinFlight, Contro
     }
     if !(out.check.overshoot.is_finite()
         && out.check.final_error.is_finite()
-        && out.swing_excess.is_finite()
-        && out.wander.is_finite())
+        && out.swing_excess.is_finite())
     {
         return Ok(TwinFlight::diverged());
     }
     Ok(out)
+}
+
+/// RMS over the hold (from [`WANDER_FROM`] + [`WANDER_SPAN`] on) of the trailing
+/// [`WANDER_SPAN`] mean of `v − v0` [m/s].
+fn wander(t: &[f64], v: &[f64], v0: &[f64]) -> f64 {
+    let start = t.partition_point(|&x| x < WANDER_FROM);
+    let mut window = std::collections::VecDeque::new();
+    let (mut sum, mut sq, mut count) = (0.0, 0.0, 0usize);
+    for k in start..v.len() {
+        window.push_back(k);
+        sum += v[k] - v0[k];
+        while let Some(&j) = window.front() {
+            if t[k] - t[j] < WANDER_SPAN {
+                break;
+            }
+            sum -= v[j] - v0[j];
+            window.pop_front();
+        }
+        if t[k] >= WANDER_FROM + WANDER_SPAN {
+            sq += (sum / window.len() as f64).powi(2);
+            count += 1;
+        }
+    }
+    (sq / count.max(1) as f64).sqrt()
 }
 
 fn mean(x: &[f64]) -> f64 {
@@ -629,12 +727,31 @@ mod tests {
         assert!(pid.swing_excess > 5.0, "{pid:?}");
         assert!(!bounds.damps(&pid, &pid), "{pid:?}");
         // ... an MPC on a model of the flight damps it, and the velocity settles sooner.
-        let f = twin
-            .fly(MpcController::new(&tpl, MpcSettings::default()).unwrap())
-            .unwrap();
+        let f = twin.fly(&tpl, &MpcSettings::default()).unwrap();
         assert!(bounds.damps(&f, &pid), "{f:?} vs {pid:?}");
         assert!(f.swing_excess < 0.3 * pid.swing_excess, "{f:?} vs {pid:?}");
         assert!(f.settle < pid.settle, "{f:?} vs {pid:?}");
+    }
+
+    #[test]
+    fn the_wander_is_what_the_sensor_noise_alone_moves_the_velocity() {
+        let (tpl, mut plant, _) = builtin_twin();
+        let sc = Scenario::builtin("training").unwrap();
+        let mpc = MpcSettings::default();
+        let mut at = |std: Option<f64>| {
+            plant.diagnostics.whitebox.as_mut().unwrap().swing_noise = std;
+            let twin = TwinPlant::new(&sc, &plant, 2.0, 1).unwrap();
+            let hold = twin.hold(&tpl, &mpc).unwrap();
+            // In still air and without noise the MPC stays on the setpoint.
+            assert!(hold.late_error < 0.005, "{hold:?}");
+            hold.wander
+        };
+        // Without noise there is nothing to wander from, whatever the flight's creep.
+        assert_eq!(at(None), 0.0);
+        let (one, two) = (at(Some(1e-4)), at(Some(2e-4)));
+        assert!(one > 0.0, "{one}");
+        // The MPC off its bounds is linear: twice the noise (the same draws), twice the wander.
+        assert!((two / one - 2.0).abs() < 0.05, "{one} {two}");
     }
 
     #[test]
@@ -649,14 +766,12 @@ mod tests {
             mpc_step_check(&plant, mpc.clone(), &plant, &StepCheckSettings::default()).unwrap();
         assert!(bounds.admit(&lin), "{lin:?}");
         // ... but on the vehicle (the attitude loop's lag, the tilt limit) it does not settle.
-        let f = twin
-            .fly(MpcController::new(&plant, mpc.clone()).unwrap())
-            .unwrap();
-        assert!(!twin_bounds.admit(&f, twin.pid_flight(), &bounds), "{f:?}");
+        let f = twin.fly(&plant, &mpc).unwrap();
+        assert!(!twin_bounds.admit(&f, &bounds), "{f:?}");
         assert!(f.settle > twin_bounds.settle, "{f:?}");
         // A small delay model of 30 s of the flight, which has the cascade's lag in its
         // data, settles there.
-        let g = twin.fly(MpcController::new(&tpl, mpc).unwrap()).unwrap();
+        let g = twin.fly(&tpl, &mpc).unwrap();
         assert!(g.settle > 0.5 && g.settle < twin_bounds.settle, "{g:?}");
         assert!(
             g.check.overshoot < 0.35 && g.check.final_error < 0.01,
