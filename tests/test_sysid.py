@@ -295,6 +295,7 @@ def test_to_statespace():
         (lambda d: d.update(format="x"), "format"),
         (lambda d: d.update(offset="sideways"), "invalid model JSON"),
         (lambda d: d["B"][0].append(1.0), "B row 0"),
+        (lambda d: d["diagnostics"].update(measurement_noise=-0.1), "measurement_noise"),
     ],
 )
 def test_bad_model_json_is_model_error(mutate, needle):
@@ -641,9 +642,9 @@ def test_the_twin_hold_flight_bounds_what_the_sensor_noise_does_to_the_velocity(
     """Campaign sample 201 (a double pendulum, swing-sensor noise 0.0097 rad): the twin flies
     with the noise estimated from the training swing. A candidate that settles there then
     holds the step for 60 s, with the noise and without; the RMS of the 2 s mean difference
-    (`wander`, what the noise alone did to the velocity) is held to 0.5 % of the step.
-    Without that bound the pick passes the noise on to the velocity and ends the real flight
-    at least 0.02 m/s off the setpoint; with it, the pick stays on the setpoint."""
+    (`wander`, what the noise alone did to the velocity) is bounded. Without that bound the
+    pick passes the noise on to the velocity and ends the real flight at least 0.02 m/s off
+    the setpoint; with it, the pick stays on the setpoint."""
     train, train_sc, ev = _campaign_sample(201)
     result = sysid.search(train)
     plant = sysid.check_plant(train, result, settings=result.settings)[0].diagnostics
@@ -652,14 +653,41 @@ def test_the_twin_hold_flight_bounds_what_the_sensor_noise_does_to_the_velocity(
     picked = sysid.select_for_control(train, result, twin=train_sc)
     cc = picked.model.diagnostics["control_check"]
     assert cc["passed"], cc
+    bound = cc["twin"]["bounds"]["wander"]
     held = [c for c in cc["checked"] if c["hold"] is not None]
-    assert all(c["hold"]["wander"] <= 0.005 for c in held if c["settled"]), held
+    assert all(c["hold"]["wander"] <= bound for c in held if c["settled"]), held
     # Candidates turned away for what the noise made of their velocity are on record.
-    assert any(c["hold"]["wander"] > 0.005 and not c["settled"] for c in held), held
+    assert any(c["hold"]["wander"] > bound and not c["settled"] for c in held), held
     ss = {
         name: _fly(ev, sel.model)["ss_error"] for name, sel in [("loose", loose), ("bound", picked)]
     }
     assert ss["loose"] >= 0.02 and ss["bound"] < 0.01, ss
+
+
+def test_a_model_whose_mpc_passes_the_noise_on_is_flown_with_an_estimator_that_trusts_it_less():
+    """Campaign sample 42 (a double pendulum, swing-sensor noise 0.0055 rad): the only
+    candidate that settles on the twin wanders 0.35 % of the step on the hold, and the real
+    flight ends 0.027 m/s off the setpoint. Checked again with its Kalman filter's
+    measurement noise raised three times, it wanders half as much; the model carries that
+    noise, the MPC built on it assumes it, and the flight ends on the setpoint."""
+    train, train_sc, ev = _campaign_sample(42)
+    result = sysid.search(train)
+    plain = sysid.select_for_control(train, result, twin=train_sc, noise_retry=1.0)
+    picked = sysid.select_for_control(train, result, twin=train_sc)
+    assert "measurement_noise" not in plain.model.diagnostics
+    assert picked.model.diagnostics["measurement_noise"] == pytest.approx(0.03)
+    cc = picked.model.diagnostics["control_check"]
+    chosen = cc["checked"][-1]
+    assert cc["passed"] and chosen["measurement_noise"] == pytest.approx(0.03), chosen
+    assert chosen["hold"]["wander"] <= cc["twin"]["bounds"]["wander"], chosen
+    ss = {
+        name: _fly(ev, sel.model)["ss_error"]
+        for name, sel in [("plain", plain), ("raised", picked)]
+    }
+    assert ss["plain"] >= 0.02 and ss["raised"] < 0.015, ss
+    # The model file keeps it: a reloaded model flies the same MPC.
+    again = sysid.LinearModel.from_json(picked.model.to_json())
+    assert again.diagnostics["measurement_noise"] == pytest.approx(0.03)
 
 
 def test_the_twin_hold_flight_shows_an_oscillation_that_grows_too_slowly_for_the_step():

@@ -255,6 +255,8 @@ def select_for_control(
     bounds: Mapping[str, float] | None = None,
     twin: _core.Scenario | None = None,
     twin_bounds: Mapping[str, float] | None = None,
+    noise_retry: float = 3.0,
+    noise_retry_wander: float = 0.003,
     **settings: Any,
 ) -> SearchResult:
     """Pick from a search the model to fly an MPC on (control-relevant selection, see
@@ -279,8 +281,12 @@ def select_for_control(
     difference) and its largest error over the last 20 s without noise (``late_error``: a
     slowly growing oscillation) are bounded, as fractions of the step. Of those that settle,
     the first whose swing excess stays within ``swing_vs_pid`` of PX4's own on the same step
-    (or below ``swing_excess_min`` deg·s) is taken, else the one that swings least. Without
-    a white-box (a model-only check) the twin is not flown."""
+    (or below ``swing_excess_min`` deg·s) is taken, else the one that swings least. A
+    candidate whose hold wanders more than ``noise_retry_wander`` is checked again with its
+    MPC's Kalman measurement noise raised ``noise_retry`` times; when that does better, the
+    model carries the raised noise (``diagnostics['measurement_noise']``) and every MPC
+    built on it assumes at least that. Without a white-box (a model-only check) the twin is
+    not flown."""
     if result.search is None:
         raise ConfigError("result: not from a search (no candidates to check)", field="result")
     s = identify_settings(**{**result.settings, **settings})
@@ -292,6 +298,8 @@ def select_for_control(
         "step": step,
         "bounds": dict(bounds or {}),
         "twin_bounds": dict(twin_bounds or {}),
+        "noise_retry": noise_retry,
+        "noise_retry_wander": noise_retry_wander,
         "plant_label": label,
     }
     if plant.method != "whitebox":

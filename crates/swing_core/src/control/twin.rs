@@ -755,6 +755,30 @@ mod tests {
     }
 
     #[test]
+    fn an_mpc_assumes_the_measurement_noise_its_model_carries() {
+        let (mut tpl, mut plant, _) = builtin_twin();
+        plant.diagnostics.whitebox.as_mut().unwrap().swing_noise = Some(4e-4);
+        let sc = Scenario::builtin("training").unwrap();
+        let twin = TwinPlant::new(&sc, &plant, 2.0, 1).unwrap();
+        let mpc = MpcSettings::default();
+        let base = twin.hold(&tpl, &mpc).unwrap().wander;
+        let raised = MpcSettings {
+            kf_measurement_noise: 0.03,
+            ..mpc.clone()
+        };
+        let by_settings = twin.hold(&tpl, &raised).unwrap().wander;
+        tpl.diagnostics.measurement_noise = Some(0.03);
+        let by_model = twin.hold(&tpl, &mpc).unwrap().wander;
+        // The model's figure is a floor: the same MPC as the settings asking for it ...
+        assert_eq!(by_model, by_settings);
+        // ... and an estimator that trusts the swing less passes less of its noise on.
+        assert!(by_model < 0.7 * base, "{by_model} vs {base}");
+        // A bad figure is an error, not a silently different filter.
+        tpl.diagnostics.measurement_noise = Some(-1.0);
+        assert!(MpcController::new(&tpl, mpc).is_err());
+    }
+
+    #[test]
     fn the_twin_sees_the_attitude_loop_that_the_linear_check_does_not() {
         use crate::control::check::{mpc_step_check, StepCheckSettings};
         use crate::control::selection::{CheckBounds, TwinBounds};

@@ -114,6 +114,11 @@ pub struct Diagnostics {
     /// White-box estimates (method `whitebox`).
     #[serde(default)]
     pub whitebox: Option<WhiteboxEstimates>,
+    /// Kalman measurement noise std [m/s, rad] that an MPC on this model assumes at least:
+    /// set by the control-relevant selection when the flight's sensor noise, fed through
+    /// the MPC with the default, moved the twin's velocity beyond its bound.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measurement_noise: Option<f64>,
     /// Anything else callers attach (search table, sweep settings …).
     #[serde(flatten)]
     pub extra: serde_json::Map<String, serde_json::Value>,
@@ -298,6 +303,13 @@ impl LinearModel {
         ] {
             if vals.iter().any(|v| !v.is_finite()) {
                 return Err(model(format!("{name} contains a non-finite value")));
+            }
+        }
+        if let Some(r) = self.diagnostics.measurement_noise {
+            if !(r.is_finite() && r > 0.0) {
+                return Err(model(format!(
+                    "diagnostics.measurement_noise must be a positive number, not {r}"
+                )));
             }
         }
         Ok(())

@@ -78,7 +78,8 @@ pub struct MpcSettings {
     /// fraction of `kf_disturbance_noise` (1 = same; < 1 adapts to a steady payload force
     /// such as wind more slowly than to a force on the vehicle).
     pub kf_swing_disturbance_scale: f64,
-    /// Kalman measurement noise std [state units: m/s, rad].
+    /// Kalman measurement noise std [state units: m/s, rad]; a model that carries a
+    /// larger one (`Diagnostics::measurement_noise`, from the selection) raises it.
     pub kf_measurement_noise: f64,
     /// QP solver for ticks with an active bound: `clarabel` or `active_set`.
     pub solver: QpSolverKind,
@@ -263,6 +264,12 @@ impl MpcController {
     /// and set up the solver. All allocation happens here.
     pub fn new(model: &LinearModel, settings: MpcSettings) -> Result<Self, ControlError> {
         settings.validate()?;
+        let mut settings = settings;
+        // A model selected on noisy data says how much noise its estimator must assume.
+        if let Some(r) = model.diagnostics.measurement_noise {
+            positive("measurement_noise", r)?;
+            settings.kf_measurement_noise = settings.kf_measurement_noise.max(r);
+        }
         let (n, q, m) = check_model(model)?;
         let nz = n * q;
         let dt = model.dt;
