@@ -72,7 +72,7 @@ fn tick_dict<'py>(py: Python<'py>, info: TickInfo) -> PyResult<Bound<'py, PyDict
     Ok(d)
 }
 
-fn step_any(
+pub(crate) fn step_any(
     ctrl: &mut dyn SwingController,
     state: &PyReadonlyArrayDyn<'_, f64>,
     vel_ref: &Bound<'_, PyAny>,
@@ -85,7 +85,7 @@ fn step_any(
     Ok((out, info))
 }
 
-fn reset_any(
+pub(crate) fn reset_any(
     ctrl: &mut dyn SwingController,
     state: &PyReadonlyArrayDyn<'_, f64>,
     acc: Option<&Bound<'_, PyAny>>,

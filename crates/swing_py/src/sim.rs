@@ -356,6 +356,43 @@ impl PySimulator {
             .map_err(to_py)
     }
 
+    /// Fly a core `Controller` (`shaper`, `payload_p`, `deepc`) from `engage_at` [s] with
+    /// `budget` [s] per tick before fallback; the simulator takes it over.
+    #[pyo3(signature = (controller, engage_at, budget))]
+    fn attach(
+        &mut self,
+        controller: &mut crate::methods::PyController,
+        engage_at: f64,
+        budget: f64,
+    ) -> PyResult<()> {
+        let ctrl = controller.take()?;
+        self.sim_mut()
+            .attach_controller(ctrl, engage_at, budget)
+            .map_err(to_py)
+    }
+
+    /// Fly a Python controller object (`reset(state, acc)`, `step(state, vel_ref)` with
+    /// state an (axes, 3) array of [v, swing, swing_rate]) on `axes` axes every `period` [s]
+    /// under the same supervisor: `output` is `acceleration` (in place of PX4's velocity
+    /// PID) or `velocity` (a setpoint PX4's PID tracks); a Python exception, a late tick
+    /// (over `budget` [s]) or a non-finite command hands the axes back to PX4.
+    #[pyo3(signature = (controller, axes, period, output, engage_at, budget))]
+    fn attach_python(
+        &mut self,
+        controller: Py<PyAny>,
+        axes: usize,
+        period: f64,
+        output: &str,
+        engage_at: f64,
+        budget: f64,
+    ) -> PyResult<()> {
+        let ctrl = crate::methods::PythonController::new(controller, axes, period, output)
+            .map_err(to_py)?;
+        self.sim_mut()
+            .attach_controller(Box::new(ctrl), engage_at, budget)
+            .map_err(to_py)
+    }
+
     /// Events of the attached controller so far as (time [s], what, value) tuples, e.g. the
     /// adaptive MPC's `detected`, `requested`, `adopted` and `rejected`.
     fn controller_events(&self) -> Vec<(f64, String, f64)> {

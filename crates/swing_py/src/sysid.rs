@@ -347,7 +347,8 @@ impl<'py> Columns<'py> {
 }
 
 /// Check a settings section against its core struct and return it with every default
-/// filled in: `identify`, `mpc`, `lqr` or `selection` (`ConfigError` naming
+/// filled in: `identify`, `mpc`, `lqr`, `selection`, `adaptive`, `shaper`, `payload_p` or
+/// `deepc` (`ConfigError` naming
 /// `section.field`).
 #[pyfunction]
 #[pyo3(signature = (section, settings=None))]
@@ -385,9 +386,30 @@ fn check_settings<'py>(
             s.validate().map_err(within)?;
             to_py_object(py, &s)
         }
+        "shaper" => {
+            let s: swing_core::control::ShaperSettings =
+                crate::convert::settings(settings, section)?;
+            s.validate().map_err(within)?;
+            to_py_object(py, &s)
+        }
+        "payload_p" => {
+            let s: swing_core::control::PayloadPSettings =
+                crate::convert::settings(settings, section)?;
+            s.validate().map_err(within)?;
+            to_py_object(py, &s)
+        }
+        "deepc" => {
+            let s: swing_core::control::DeepcSettings =
+                crate::convert::settings(settings, section)?;
+            s.validate().map_err(within)?;
+            to_py_object(py, &s)
+        }
         other => Err(raise(
             Category::Config,
-            format!("unknown settings section {other:?} (identify, mpc, lqr, selection, adaptive)"),
+            format!(
+                "unknown settings section {other:?} (identify, mpc, lqr, selection, adaptive, \
+                 shaper, payload_p, deepc)"
+            ),
         )),
     }
 }

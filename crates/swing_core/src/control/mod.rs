@@ -12,15 +12,21 @@ use crate::error::{Categorized, Category};
 
 pub mod adaptive;
 pub mod check;
+pub mod deepc;
 pub mod layout;
 pub mod lqr;
 pub mod mpc;
+pub mod payload_p;
 pub mod plant;
 pub mod riccati;
 pub mod selection;
+pub mod shaper;
 pub mod twin;
 
 pub use adaptive::{AdaptiveMpc, AdaptiveSettings, SynthesisMode};
+pub use deepc::{DeepcController, DeepcSettings};
+pub use payload_p::{PayloadP, PayloadPSettings};
+pub use shaper::{InputShaper, ShaperKind, ShaperSettings, SwingMode};
 pub use check::{mpc_step_check, step_check_with, StepCheck, StepCheckSettings};
 pub use layout::{AxisColumns, AxisLayout, Measured};
 pub use lqr::{LqrController, LqrSettings};
@@ -59,6 +65,17 @@ pub enum TickKind {
     Unconstrained,
     /// A constrained QP was solved.
     Constrained,
+}
+
+/// What a controller's output replaces in PX4's cascade.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ControlOutput {
+    /// An acceleration setpoint [m/s²] in place of PX4's velocity PID (MPC, LQR, DeePC).
+    #[default]
+    Acceleration,
+    /// A velocity setpoint [m/s] that PX4's own velocity PID then tracks (input shaper,
+    /// payload feedback on the velocity setpoint).
+    Velocity,
 }
 
 /// What one controller tick did, for logging.
@@ -150,9 +167,14 @@ pub trait SwingController: Send {
     fn axes(&self) -> usize;
     /// Tick period [s]; the runner calls [`SwingController::step`] at this rate.
     fn period(&self) -> f64;
+    /// What the output of [`SwingController::step`] is (default: an acceleration setpoint).
+    fn output(&self) -> ControlOutput {
+        ControlOutput::Acceleration
+    }
     /// Start from the given measured state and acceleration setpoint (bumpless transfer).
     fn reset(&mut self, state: &[AxisState], acc: &[f64]);
-    /// One tick: measured state and velocity reference in, acceleration setpoint [m/s²] out.
+    /// One tick: measured state and velocity reference in, acceleration setpoint [m/s²] out
+    /// (or a velocity setpoint [m/s] when [`SwingController::output`] says so).
     fn step(
         &mut self,
         state: &[AxisState],
