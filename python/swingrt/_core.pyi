@@ -10,6 +10,7 @@ import numpy.typing as npt
 __version__: str
 __all__ = [
     "AdaptiveMpc",
+    "Controller",
     "FLIGHT_COLUMNS",
     "GRAVITY",
     "HilPlant",
@@ -35,6 +36,7 @@ __all__ = [
     "select_for_control",
     "sim_real_time_factor",
     "step_overshoot",
+    "swing_mode",
     "sysid_cable_length",
     "sysid_fft_peak",
     "sysid_rls_mass",
@@ -128,6 +130,16 @@ class Simulator:
         budget: float,
         twin: Scenario | None = None,
         twin_payload: tuple[float, float, float] | None = None,
+    ) -> None: ...
+    def attach(self, controller: Controller, engage_at: float, budget: float) -> None: ...
+    def attach_python(
+        self,
+        controller: Any,
+        axes: int,
+        period: float,
+        output: str,
+        engage_at: float,
+        budget: float,
     ) -> None: ...
     def controller_events(self) -> list[tuple[float, str, float]]: ...
     def controller_prediction(self) -> npt.NDArray[np.float64] | None: ...
@@ -293,6 +305,39 @@ class Lqr:
     def reset(self, state: npt.NDArray[np.float64], acc: Any = None) -> None: ...
     def gain(self) -> npt.NDArray[np.float64]: ...
 
+@final
+class Controller:
+    @staticmethod
+    def shaper(omega: float, zeta: float, axes: int = 1, settings: Any = None) -> Controller: ...
+    @staticmethod
+    def payload_p(length: float, axes: int = 1, settings: Any = None) -> Controller: ...
+    @staticmethod
+    def deepc(
+        u: npt.NDArray[np.float64],
+        y: npt.NDArray[np.float64],
+        u_test: npt.NDArray[np.float64],
+        y_test: npt.NDArray[np.float64],
+        dt: float,
+        settings: Any = None,
+    ) -> Controller: ...
+    @property
+    def kind(self) -> str: ...
+    @property
+    def output(self) -> str: ...
+    @property
+    def period(self) -> float: ...
+    @property
+    def axes(self) -> int: ...
+    def step(self, state: npt.NDArray[np.float64], vel_ref: Any) -> npt.NDArray[np.float64]: ...
+    def reset(self, state: npt.NDArray[np.float64], acc: Any = None) -> None: ...
+    def info(self) -> dict[str, Any]: ...
+
+def swing_mode(
+    model: LinearModel | None = None,
+    params: Any = None,
+    dt: float = 0.03,
+    px4: Any = None,
+) -> tuple[float, float]: ...
 def mpc_step_check(
     model: LinearModel,
     plants: list[LinearModel],

@@ -11,9 +11,7 @@ use swing_core::control::px4::Px4Params;
 use swing_core::control::shaper::{
     model_swing_mode, pendulum_swing_mode, InputShaper, ShaperSettings, SwingMode,
 };
-use swing_core::control::{
-    AxisState, ControlError, ControlOutput, SwingController, TickInfo,
-};
+use swing_core::control::{AxisState, ControlError, ControlOutput, SwingController, TickInfo};
 use swing_core::plant::PendulumModel;
 use swing_core::ConfigError;
 

@@ -262,7 +262,8 @@ impl Hankel {
         let mut dh = DMatrix::<f64>::zeros(rows, keep.len());
         for (k, &i) in keep.iter().enumerate() {
             let s = eig.eigenvalues[i].sqrt();
-            dh.column_mut(k).copy_from(&(eig.eigenvectors.column(i) * s));
+            dh.column_mut(k)
+                .copy_from(&(eig.eigenvectors.column(i) * s));
         }
         Ok(Self {
             t_ini,
@@ -592,10 +593,8 @@ impl DeepcController {
         let ne = (ti + n) * m;
         let mut bu = DMatrix::<f64>::zeros(r + ne, nu);
         let mut bt = DMatrix::<f64>::zeros(r + ne, nth);
-        bu.rows_mut(0, r)
-            .copy_from(&(ah.transpose() * &au * -2.0));
-        bt.rows_mut(0, r)
-            .copy_from(&(ah.transpose() * &at * -2.0));
+        bu.rows_mut(0, r).copy_from(&(ah.transpose() * &au * -2.0));
+        bt.rows_mut(0, r).copy_from(&(ah.transpose() * &at * -2.0));
         for i in 0..ti {
             for c in 0..m {
                 bt[(r + i * m + c, th_u + i * m + c)] = 1.0 / hk.su[c];
@@ -785,6 +784,7 @@ mod tests {
 
     /// The model-based MPC with the same cost, condensed by hand from the true (A, B) and
     /// the true state: min over U of ‖W(Y − R)‖² + ‖W_Δu ΔU‖² (unconstrained).
+    #[allow(clippy::too_many_arguments)] // a test oracle: the true model, state and cost
     fn model_mpc(
         a: &DMatrix<f64>,
         b: &DMatrix<f64>,
@@ -901,7 +901,10 @@ mod tests {
         let want = model_mpc(&a, &b, &x, s_prev, u_last, 1.0, &s, dt);
         let got = DVector::from_column_slice(ctrl.predicted_inputs());
         let err = (&got - &want).amax() / want.amax();
-        assert!(err < 1e-4, "DeePC {got} vs MPC {want}: relative error {err}");
+        assert!(
+            err < 1e-4,
+            "DeePC {got} vs MPC {want}: relative error {err}"
+        );
     }
 
     #[test]

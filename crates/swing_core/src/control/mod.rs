@@ -24,15 +24,15 @@ pub mod shaper;
 pub mod twin;
 
 pub use adaptive::{AdaptiveMpc, AdaptiveSettings, SynthesisMode};
-pub use deepc::{DeepcController, DeepcSettings};
-pub use payload_p::{PayloadP, PayloadPSettings};
-pub use shaper::{InputShaper, ShaperKind, ShaperSettings, SwingMode};
 pub use check::{mpc_step_check, step_check_with, StepCheck, StepCheckSettings};
+pub use deepc::{DeepcController, DeepcSettings};
 pub use layout::{AxisColumns, AxisLayout, Measured};
 pub use lqr::{LqrController, LqrSettings};
 pub use mpc::{MpcController, MpcSettings, QpSolverKind};
+pub use payload_p::{PayloadP, PayloadPSettings};
 pub use plant::LinearPlant;
 pub use riccati::{care, dare, RiccatiSolution};
+pub use shaper::{InputShaper, ShaperKind, ShaperSettings, SwingMode};
 
 /// Measured state of one controlled horizontal axis (North or East).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

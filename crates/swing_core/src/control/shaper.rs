@@ -273,7 +273,9 @@ pub fn swing_mode(
     bcl[n] = ki * dt;
     acl[(n + 1, iv)] = 1.0;
     if acl.iter().any(|x| !x.is_finite()) {
-        return Err(ControlError::Model("swing mode: model is not finite".into()));
+        return Err(ControlError::Model(
+            "swing mode: model is not finite".into(),
+        ));
     }
     let eig = acl.complex_eigenvalues();
     let ac = acl.map(|x| Complex::new(x, 0.0));
@@ -297,7 +299,8 @@ pub fn swing_mode(
     }
     let Some((_, lam)) = best else {
         return Err(ControlError::Model(
-            "swing mode: the closed loop has no oscillatory pole pair inside the unit circle".into(),
+            "swing mode: the closed loop has no oscillatory pole pair inside the unit circle"
+                .into(),
         ));
     };
     let s = lam.ln() / dt;
@@ -372,7 +375,10 @@ mod tests {
         assert!(residual < 1e-12, "ZV residual {residual}");
         let (x, w) = oscillator(&vec![1.0; 400], omega, dt);
         let unshaped = ((x - 1.0).powi(2) + w * w).sqrt();
-        assert!((unshaped - 1.0).abs() < 1e-9, "unshaped residual {unshaped}");
+        assert!(
+            (unshaped - 1.0).abs() < 1e-9,
+            "unshaped residual {unshaped}"
+        );
         let (x, w) = oscillator(&shaped_step(ShaperKind::Zvd, mode, dt, 400), omega, dt);
         assert!(((x - 1.0).powi(2) + w * w).sqrt() < 1e-12);
     }
@@ -411,7 +417,10 @@ mod tests {
         };
         assert!(residual(ShaperKind::Zv, 3.0) < 1e-12);
         assert!(residual(ShaperKind::Zvd, 3.0) < 1e-12);
-        let (zv, zvd) = (residual(ShaperKind::Zv, 3.3), residual(ShaperKind::Zvd, 3.3));
+        let (zv, zvd) = (
+            residual(ShaperKind::Zv, 3.3),
+            residual(ShaperKind::Zvd, 3.3),
+        );
         assert!(zvd < 0.25 * zv, "ZV {zv}, ZVD {zvd} at +10 % frequency");
         let sum: f64 = impulses(ShaperKind::Zvd, mode).iter().map(|x| x.1).sum();
         assert!((sum - 1.0).abs() < 1e-12);
@@ -428,13 +437,19 @@ mod tests {
         };
         let dt = 0.03;
         let (a, b) = p.discrete(dt);
-        let mut px4 = Px4Params::default();
-        px4.vel_p = [0.0; 3];
-        px4.vel_i = [0.0; 3];
-        px4.vel_d = [0.0; 3];
+        let px4 = Px4Params {
+            vel_p: [0.0; 3],
+            vel_i: [0.0; 3],
+            vel_d: [0.0; 3],
+            ..Default::default()
+        };
         let m = swing_mode(&a, &b, 0, 1, dt, &px4).unwrap();
         let want = (crate::plant::GRAVITY * 1.2 / 1.5).sqrt();
-        assert!((m.omega - want).abs() < 1e-9 * want, "{} vs {want}", m.omega);
+        assert!(
+            (m.omega - want).abs() < 1e-9 * want,
+            "{} vs {want}",
+            m.omega
+        );
         assert!(m.zeta < 1e-9);
         // Under PX4's velocity PID the mode moves but stays a lightly damped swing.
         let m = swing_mode(&a, &b, 0, 1, dt, &Px4Params::default()).unwrap();
