@@ -9,6 +9,7 @@ mod control;
 mod convert;
 mod errors;
 mod hil;
+mod mission;
 mod sim;
 mod sysid;
 
@@ -21,5 +22,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     hil::register(m)?;
     sysid::register(m)?;
     control::register(m)?;
+    mission::register(m)?;
     Ok(())
 }
