@@ -13,6 +13,7 @@
 pub mod config;
 pub mod control;
 pub mod error;
+pub mod mission;
 pub mod plant;
 pub mod sim;
 pub mod sysid;

@@ -10,6 +10,7 @@ mod convert;
 mod errors;
 mod hil;
 mod methods;
+mod mission;
 mod sim;
 mod sysid;
 
@@ -23,5 +24,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     sysid::register(m)?;
     control::register(m)?;
     methods::register(m)?;
+    mission::register(m)?;
     Ok(())
 }

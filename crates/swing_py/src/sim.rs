@@ -422,6 +422,59 @@ impl PySimulator {
             .map_err(to_py)
     }
 
+    /// Fly `mission` from `start_at` [s] with the guidance of `guidance` settings (a dict of
+    /// `GuidanceSettings` fields; mode `smooth` — swingrt's legs — or `px4` — PX4's mission
+    /// behaviour): its trajectory setpoint replaces the scenario's setpoints on every axis.
+    #[pyo3(signature = (mission, guidance=None, start_at=0.0))]
+    fn fly_mission(
+        &mut self,
+        mission: &crate::mission::PyMission,
+        guidance: Option<&Bound<'_, PyAny>>,
+        start_at: f64,
+    ) -> PyResult<()> {
+        let s: swing_core::mission::GuidanceSettings =
+            crate::convert::settings(guidance, "guidance")?;
+        let g = s
+            .build(&mission.inner)
+            .map_err(|e| to_py(crate::convert::within(e, "guidance")))?;
+        self.sim_mut().fly_mission(g, start_at).map_err(to_py)
+    }
+
+    /// Whether the mission flown is complete.
+    #[getter]
+    fn mission_done(&self) -> bool {
+        self.sim().mission_done()
+    }
+
+    /// The mission's events so far as (time [s], item index, kind) with kind `started`,
+    /// `reached`, `left` or `completed`.
+    fn mission_events(&self) -> Vec<(f64, usize, String)> {
+        self.sim()
+            .mission_events()
+            .iter()
+            .map(|e| (e.t, e.item, e.kind.name().to_string()))
+            .collect()
+    }
+
+    /// Fly the position-tracking MPC with preview (`control::mpc::tracking`) on an
+    /// identified model with `tracking` settings from `engage_at` [s]; it tracks the mission
+    /// flown (`fly_mission`) and engages when the mission starts.
+    #[pyo3(signature = (model, tracking, engage_at, budget))]
+    fn attach_tracking_mpc(
+        &mut self,
+        model: &PyLinearModel,
+        tracking: Option<&Bound<'_, PyAny>>,
+        engage_at: f64,
+        budget: f64,
+    ) -> PyResult<()> {
+        let tracking: swing_core::control::TrackingSettings =
+            crate::convert::settings(tracking, "tracking")?;
+        let mpc = swing_core::control::TrackingMpc::new(&model.inner, tracking).map_err(to_py)?;
+        self.sim_mut()
+            .attach_controller(Box::new(mpc), engage_at, budget)
+            .map_err(to_py)
+    }
+
     /// Predicted outputs of the attached controller's last tick (MPC), else None.
     fn controller_prediction<'py>(&mut self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
         self.sim_mut()

@@ -28,6 +28,7 @@ pub use check::{mpc_step_check, step_check_with, StepCheck, StepCheckSettings};
 pub use deepc::{DeepcController, DeepcSettings};
 pub use layout::{AxisColumns, AxisLayout, Measured};
 pub use lqr::{LqrController, LqrSettings};
+pub use mpc::tracking::{TrackTarget, TrackingMpc, TrackingSettings};
 pub use mpc::{MpcController, MpcSettings, QpSolverKind};
 pub use payload_p::{PayloadP, PayloadPSettings};
 pub use plant::LinearPlant;
@@ -43,6 +44,29 @@ pub struct AxisState {
     pub swing: f64,
     /// Swing angle rate [rad/s].
     pub swing_rate: f64,
+}
+
+/// A reference trajectory over the coming ticks for controllers that track a position with
+/// preview: per step k (k = 0 is now, then every controller tick) and horizontal axis
+/// (North, East) the reference position [m], velocity [m/s], acceleration [m/s²] and jerk
+/// [m/s³], and the acceleration bound of the leg flown now.
+#[derive(Clone, Copy, Debug)]
+pub struct ReferencePreview<'a> {
+    /// Number of steps (k = 0 … steps − 1).
+    pub steps: usize,
+    /// Number of axes in `data`.
+    pub axes: usize,
+    /// `data[(k · axes + axis) · 4 + c]`, c = 0 position, 1 velocity, 2 acceleration, 3 jerk.
+    pub data: &'a [f64],
+    /// Acceleration bound of the leg flown now [m/s²] (none: the controller's own).
+    pub acc_limit: Option<f64>,
+}
+
+impl ReferencePreview<'_> {
+    /// Channel `c` (0 position, 1 velocity, 2 acceleration, 3 jerk) of `axis` at step `k`.
+    pub fn get(&self, k: usize, axis: usize, c: usize) -> f64 {
+        self.data[(k * self.axes + axis) * 4 + c]
+    }
 }
 
 /// Something a controller did that a flight log should show (e.g. a model re-adopted).
@@ -193,6 +217,16 @@ pub trait SwingController: Send {
     /// [N] and the down velocity [m/s] (payload mass estimates); called before
     /// [`SwingController::step`] where the runner knows them. The default ignores them.
     fn observe_vertical(&mut self, _thrust_vertical: f64, _vd: f64) {}
+    /// Steps of reference a controller that tracks a position with preview wants before each
+    /// tick (see [`SwingController::observe_reference`]); 0 (the default) for controllers
+    /// that track the velocity reference of [`SwingController::step`].
+    fn reference_steps(&self) -> usize {
+        0
+    }
+    /// The measured horizontal position [m] (one per axis) and the reference over the
+    /// coming ticks, given before each [`SwingController::step`] while a trajectory is flown
+    /// to controllers with [`SwingController::reference_steps`] > 0. The default ignores them.
+    fn observe_reference(&mut self, _position: &[f64], _preview: &ReferencePreview<'_>) {}
     /// Events so far (see [`ControllerEvent`]); empty for controllers without any. Not for
     /// the real-time path.
     fn events(&self) -> Vec<ControllerEvent> {

@@ -12,6 +12,7 @@ use super::ticker::Ticker;
 use crate::config::{non_negative, positive, ConfigError};
 use crate::control::px4::{AxisSetpoint, Px4Cascade, Px4Params, Setpoint};
 use crate::control::{AxisState, ControlOutput, SwingController, TickKind};
+use crate::mission::{Guidance, PreviewBuffer};
 
 /// An attached controller and its schedule.
 struct Attached {
@@ -28,6 +29,8 @@ struct Attached {
     vel_ref: [f64; 2],
     /// Time of the reset tick [s] (the controller counts ticks from it).
     t_start: f64,
+    /// The guidance's preview for a controller that tracks a position (sized at attach).
+    preview: PreviewBuffer,
 }
 
 /// What a controller tick reads from the simulation.
@@ -46,6 +49,8 @@ pub(crate) struct TickInputs<'a> {
     pub px4: &'a Px4Params,
     /// Rotor thrust projected on the vertical (up) [N].
     pub thrust_vertical: f64,
+    /// The mission's guidance, once a mission is flown.
+    pub guidance: Option<&'a dyn Guidance>,
 }
 
 /// The swing controller's supervisor (see module docs); without a controller it does nothing.
@@ -86,8 +91,11 @@ impl ControllerSupervisor {
         non_negative("controller.engage_at", engage_at)?;
         positive("controller.budget", budget)?;
         let output = ctrl.output();
+        let ref_steps = ctrl.reference_steps();
+        let axes = ctrl.axes();
         self.attached = Some(Attached {
             output,
+            preview: PreviewBuffer::new(ref_steps, axes),
             ctrl,
             ticker: Ticker::at_step(steps.round() as u64, step),
             budget,
@@ -201,8 +209,20 @@ impl ControllerSupervisor {
                 AxisSetpoint::Velocity(v) => v,
                 AxisSetpoint::Position(x) => ((x - inp.pos[i]) * inp.px4.pos_p[i])
                     .clamp(-inp.px4.vel_max_xy, inp.px4.vel_max_xy),
+                AxisSetpoint::Trajectory { p, v, .. } => (v + (p - inp.pos[i]) * inp.px4.pos_p[i])
+                    .clamp(-inp.px4.vel_max_xy, inp.px4.vel_max_xy),
                 AxisSetpoint::Acceleration(_) => 0.0,
             };
+        }
+        if a.preview.steps() > 0 {
+            // A controller that tracks a trajectory engages with the mission.
+            let Some(g) = inp.guidance else {
+                return;
+            };
+            let period = a.ctrl.period();
+            let view = a.preview.fill(g, t, period);
+            a.ctrl
+                .observe_reference(&[inp.pos[0], inp.pos[1]][..axes], &view);
         }
         if !a.started {
             let acc = [fc.acc_sp.x, fc.acc_sp.y];
