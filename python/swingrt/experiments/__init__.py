@@ -25,6 +25,7 @@ from swingrt.experiments.runner import (
     load_experiment,
     run_experiment,
     simulate_controller,
+    train_methods,
     training_scenario,
 )
 
@@ -37,5 +38,6 @@ __all__ = [
     "load_experiment",
     "run_experiment",
     "simulate_controller",
+    "train_methods",
     "training_scenario",
 ]

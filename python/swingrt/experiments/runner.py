@@ -27,6 +27,8 @@ import numpy as np
 
 from swingrt.errors import ConfigError
 from swingrt.io.flight import Trace
+from swingrt.methods import METHODS
+from swingrt.methods import SECTIONS as METHOD_SECTIONS
 from swingrt.metrics import step_metrics, swing_iae_floor
 from swingrt.reports import plot_case, plot_prediction, write_metrics
 from swingrt.scenario import Scenario, read_toml
@@ -56,10 +58,12 @@ _KNOWN_KEYS = {
     "training_duration",
     "adaptive",
     "cases",
+    "tick_budget",
+    *METHOD_SECTIONS,
 }
 
 #: Controllers an experiment can compare.
-CONTROLLERS = ("pid", "lqr", "mpc", "mpc_adaptive", "mpc_oracle")
+CONTROLLERS = ("pid", "lqr", "mpc", "mpc_adaptive", "mpc_oracle", *METHODS)
 
 #: Keys of one entry of an experiment's ``[cases.<name>]`` table.
 _CASE_KEYS = {"description", "common", "evaluation", "oracle", "step"}
@@ -86,6 +90,14 @@ class Experiment:
     lqr: dict[str, Any] = field(default_factory=dict)
     adaptive: dict[str, Any] = field(default_factory=dict)
     cases: dict[str, dict[str, Any]] = field(default_factory=dict)
+    #: Compute time a controller tick may take before the hand-back to PX4 [s] (None: its
+    #: period, as in flight; a study that scores control apart from timing sets more).
+    tick_budget: float | None = None
+    shaper: dict[str, Any] = field(default_factory=dict)
+    payload_p: dict[str, Any] = field(default_factory=dict)
+    deepc: dict[str, Any] = field(default_factory=dict)
+    nmpc: dict[str, Any] = field(default_factory=dict)
+    sindy: dict[str, Any] = field(default_factory=dict)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], source: str) -> Experiment:
@@ -135,6 +147,18 @@ class Experiment:
             _core.check_settings("mpc", self.mpc)
             _core.check_settings("lqr", self.lqr)
             _core.check_settings("adaptive", self.adaptive)
+            from swingrt.methods import check_settings as check_method
+
+            for sec in METHOD_SECTIONS:
+                check_method(sec, getattr(self, sec))
+            tb = self.tick_budget
+            if tb is not None and not (
+                isinstance(tb, (int, float)) and not isinstance(tb, bool) and 0 < tb <= 60
+            ):
+                raise ConfigError(
+                    f"tick_budget: must be a number of seconds in (0, 60] (got {tb!r})",
+                    field="tick_budget",
+                )
             for case, over in cases(self):
                 try:
                     train = training_scenario(self, over, 0)
@@ -274,12 +298,18 @@ def simulate_controller(
     engage_at: float = 0.0,
     prediction_at: float | None = None,
     twin: Scenario | None = None,
+    method: Any = None,
+    budget: float | None = None,
 ) -> tuple[Trace, dict[str, Any]]:
     """Fly one scenario with a controller of :data:`CONTROLLERS` on the given axes
     (``mpc_oracle`` is the MPC on whatever ``model`` it is given). ``twin`` (the training
     flight's scenario) lets ``mpc_adaptive`` re-identify on the vehicle's twin for the
     payload it measures, starting from the white-box ``lqr_params`` (``m_q``, ``m_p``,
     ``l``) of the training flight, when ``adaptive_settings`` enable it.
+
+    The controllers of :mod:`swingrt.methods` fly what ``method`` (their
+    :class:`~swingrt.methods.Trained`) learned. ``budget`` [s] is the compute time a tick
+    may take before the hand-back to PX4 (default: the controller's period).
 
     Returns the trace and extras: fallback reason, tick timings, the controller's events
     (time [s], what, value) and (``prediction_at``) the MPC's predicted outputs from the
@@ -312,18 +342,24 @@ def simulate_controller(
                 mpc_settings or None,
                 adaptive_settings or None,
                 engage_at,
-                model.dt,
+                budget or model.dt,
                 twin if use_twin else None,
                 prior,
             )
         else:
-            sim.attach_mpc(model, mpc_settings or None, engage_at, model.dt)
+            sim.attach_mpc(model, mpc_settings or None, engage_at, budget or model.dt)
+    elif controller in METHODS:
+        from swingrt.methods import attach
+
+        if method is None or method.name != controller:
+            raise ConfigError(f"{controller} needs what it learned from the training flight")
+        attach(sim, method, engage_at, budget)
     elif controller == "lqr":
         if lqr_params is None:
             raise ConfigError("lqr needs the white-box parameters", field="lqr_params")
         lqr = _core.check_settings("lqr", lqr_settings or None)
         # The budget of one tick is its period.
-        sim.attach_lqr(lqr_params, n_axes, lqr, engage_at, lqr["period"])
+        sim.attach_lqr(lqr_params, n_axes, lqr, engage_at, budget or lqr["period"])
     elif controller != "pid":
         raise ConfigError(f"unknown controller {controller!r}", field="controller")
     if prediction_at is not None and model is not None and controller.startswith("mpc"):
@@ -376,6 +412,33 @@ def identify_case(
     return model, wb, lqr
 
 
+def train_methods(
+    train: Trace, exp: Experiment, model: Any, lqr: dict[str, float], twin: Scenario | None
+) -> dict[str, Any]:
+    """What each controller of :mod:`swingrt.methods` in ``exp.controllers`` learns from
+    the training flight (:func:`swingrt.methods.train`), by name."""
+    from swingrt.methods import train as train_method
+
+    px4 = twin.to_dict().get("controller") if twin is not None else None
+    sections = {s: getattr(exp, s) for s in METHOD_SECTIONS}
+    return {
+        c: train_method(
+            c,
+            train,
+            axes=exp.axes,
+            sections=sections,
+            model=model,
+            whitebox=lqr,
+            px4=px4,
+            identify=exp.identify,
+            mpc_settings=exp.mpc or None,
+            twin=twin,
+        )
+        for c in exp.controllers
+        if c in METHODS
+    }
+
+
 def run_experiment(
     exp: Experiment, out: str | os.PathLike, *, seed: int = 0, quiet: bool = False
 ) -> list[dict[str, Any]]:
@@ -396,6 +459,7 @@ def run_experiment(
         model, wb, lqr = identify_case(
             train, exp, out / f"{case}__error_vs_delays.png", twin=train_sc
         )
+        trained = train_methods(train, exp, model, lqr, train_sc)
         train.to_parquet(out / f"{case}__training.parquet")
         model.save(out / f"{case}__model.json")
         wb.save(out / f"{case}__whitebox.json")
@@ -422,6 +486,8 @@ def run_experiment(
                 adaptive_settings=exp.adaptive or None,
                 prediction_at=step["t"] if exp.prediction_figure else None,
                 twin=train_sc,
+                method=trained.get(ctrl),
+                budget=exp.tick_budget,
             )
             if ctrl == "mpc_adaptive":
                 notes.append(f"{case}: {adaptation_note(ev_sc, extras['events'])}")
