@@ -14,6 +14,7 @@ pub mod config;
 pub mod control;
 pub mod error;
 pub mod plant;
+pub mod sensors;
 pub mod sim;
 pub mod sysid;
 pub mod testing;
