@@ -90,7 +90,10 @@ def test_swingrt_mission_prints_one_row_per_waypoint(tmp_path, capsys):
     plan = tmp_path / "square.toml"
     plan.write_text(SQUARE)
     out = tmp_path / "report.json"
-    assert main(["mission", str(plan), "--guidance", "smooth", "-o", str(out)]) == 0
+    scenario = tmp_path / "payload.toml"
+    scenario.write_text("[payload]\nmass = 0.3\nlength = 1.5\n")
+    args = ["mission", str(plan), "--guidance", "smooth", "--scenario", str(scenario)]
+    assert main([*args, "-o", str(out)]) == 0
     report = json.loads(out.read_text())["smooth"]
     rows = report["waypoints"]
     assert [r["item"] for r in rows] == [0, 1, 2]

@@ -20,6 +20,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
         default=",".join(GUIDANCES),
         help="comma-separated guidances to fly (px4, smooth; default both)",
     )
+    p.add_argument(
+        "--scenario", help="scenario TOML of the flight (payload, wind, vehicle; default built-in)"
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of every random generator")
     p.add_argument("-o", "--output", help="write the per-waypoint rows as JSON here")
     return p
@@ -29,6 +32,7 @@ def run(args: argparse.Namespace) -> int:
     """Fly the mission once per guidance and print (and optionally write) the report."""
     from swingrt import mission as ms
     from swingrt.io.atomic import write_text_atomic
+    from swingrt.scenario import read_toml
 
     chosen = [g.strip() for g in args.guidance.split(",") if g.strip()]
     if not chosen:
@@ -37,9 +41,10 @@ def run(args: argparse.Namespace) -> int:
         if g not in GUIDANCES:
             raise ConfigError(f"--guidance: {g!r} is not one of {', '.join(GUIDANCES)}")
     m = ms.load(args.plan)
+    scenario = read_toml(args.scenario) if args.scenario else None
     out = {}
     for g in chosen:
-        trace, events = ms.fly(m, g, seed=args.seed)
+        trace, events = ms.fly(m, g, scenario, seed=args.seed)
         rows = ms.waypoint_report(m, trace, events)
         total = max(t for t, _, k in events if k == "completed")
         print(ms.format_report(g, rows, total))
