@@ -15,6 +15,7 @@ pub mod control;
 pub mod error;
 pub mod mission;
 pub mod plant;
+pub mod sensors;
 pub mod sim;
 pub mod sysid;
 pub mod testing;
