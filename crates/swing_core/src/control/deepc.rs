@@ -465,7 +465,7 @@ impl DeepcController {
             .unwrap_or_else(|| settings.t_ini_grid.clone());
         // λ_g is not chosen on the prediction error (see the settings); the grid's largest
         // stands in when none is given.
-        let grid_g = vec![settings.lambda_g.unwrap_or_else(|| {
+        let grid_g = [settings.lambda_g.unwrap_or_else(|| {
             settings
                 .lambda_g_grid
                 .iter()
