@@ -110,3 +110,28 @@ def test_swingrt_mission_prints_one_row_per_waypoint(tmp_path, capsys):
     bad.write_text(SQUARE)
     assert main(["mission", str(bad)]) == 2
     assert "must end in .plan or .toml" in capsys.readouterr().err
+
+
+def test_swingrt_mission_flies_the_position_mpc_on_a_model(tmp_path, capsys):
+    from swingrt import mission as ms
+    from swingrt.cli import main
+    from swingrt.sysid import identify
+
+    # The model is the white-box pendulum identified from a PX4-guided flight of the plan
+    # (its cable length is estimated from the swing, not copied from the plant).
+    m = _core.Mission.from_text(SQUARE, "toml")
+    scenario = {"payload": {"mass": 0.3, "length": 1.5}}
+    trace, _ = ms.fly(m, "px4", scenario)
+    model = identify(trace, axes="ne", method="whitebox", payload_mass=0.3, test_span=8.0)
+    model.save(str(tmp_path / "model.json"))
+    (tmp_path / "square.toml").write_text(SQUARE)
+    (tmp_path / "payload.toml").write_text("[payload]\nmass = 0.3\nlength = 1.5\n")
+    args = ["mission", str(tmp_path / "square.toml"), "--guidance", "px4"]
+    args += ["--scenario", str(tmp_path / "payload.toml"), "--model", str(tmp_path / "model.json")]
+    assert main([*args, "-o", str(tmp_path / "r.json")]) == 0
+    capsys.readouterr()
+    report = json.loads((tmp_path / "r.json").read_text())
+    px4, mpc = report["px4"]["waypoints"], report["mpc"]["waypoints"]
+    assert [r["item"] for r in mpc] == [0, 1, 2]
+    for a, b in zip(px4[1:], mpc[1:], strict=True):
+        assert b["leg_swing_max_deg"] < a["leg_swing_max_deg"]

@@ -39,11 +39,16 @@ def load(path: str) -> _core.Mission:
 
 
 def fly(
-    mission: _core.Mission, guidance: str, scenario: dict[str, Any] | None = None, seed: int = 0
+    mission: _core.Mission,
+    guidance: str,
+    scenario: dict[str, Any] | None = None,
+    seed: int = 0,
+    model: _core.LinearModel | None = None,
 ) -> tuple[dict[str, np.ndarray], list[tuple[float, int, str]]]:
     """Fly ``mission`` in the simulator under PX4's cascade with ``guidance`` (``px4``: PX4's
-    mission behaviour; ``smooth``: swingrt's jerk-limited legs); returns the trace and the
-    mission's events. The flight ends at the last hold's end (or fails after a time limit)."""
+    mission behaviour; ``smooth``: swingrt's jerk-limited legs), tracked by the position MPC
+    with preview on ``model`` when one is given; returns the trace and the mission's events.
+    The flight ends at the last hold's end (or fails after a time limit)."""
     from swingrt.scenario import resolve
 
     items = mission.items
@@ -56,6 +61,10 @@ def fly(
     cfg["start"] = list(mission.start)
     sim = _core.Simulator(resolve(cfg, duration=limit, seed=seed))
     sim.fly_mission(mission, {"mode": guidance}, 1.0)
+    if model is not None:
+        # The budget is wall-clock per tick; the simulator is not real-time, so a loaded
+        # machine must not hand the axes back to PX4.
+        sim.attach_tracking_mpc(model, None, 1.0, 1.0)
     while not sim.mission_done and sim.t < limit - 0.5:
         sim.advance(0.5)
     if not sim.mission_done:

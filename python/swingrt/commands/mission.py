@@ -23,6 +23,11 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument(
         "--scenario", help="scenario TOML of the flight (payload, wind, vehicle; default built-in)"
     )
+    p.add_argument(
+        "--model",
+        help="identified model (both axes): also fly the position MPC with preview on it "
+        "along swingrt's legs (reported as mpc)",
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of every random generator")
     p.add_argument("-o", "--output", help="write the per-waypoint rows as JSON here")
     return p
@@ -30,6 +35,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
 
 def run(args: argparse.Namespace) -> int:
     """Fly the mission once per guidance and print (and optionally write) the report."""
+    from swingrt import _core
     from swingrt import mission as ms
     from swingrt.io.atomic import write_text_atomic
     from swingrt.scenario import read_toml
@@ -42,13 +48,16 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError(f"--guidance: {g!r} is not one of {', '.join(GUIDANCES)}")
     m = ms.load(args.plan)
     scenario = read_toml(args.scenario) if args.scenario else None
+    flights: list[tuple[str, str, _core.LinearModel | None]] = [(g, g, None) for g in chosen]
+    if args.model:
+        flights.append(("mpc", "smooth", _core.LinearModel.load(args.model)))
     out = {}
-    for g in chosen:
-        trace, events = ms.fly(m, g, scenario, seed=args.seed)
+    for name, g, model in flights:
+        trace, events = ms.fly(m, g, scenario, seed=args.seed, model=model)
         rows = ms.waypoint_report(m, trace, events)
         total = max(t for t, _, k in events if k == "completed")
-        print(ms.format_report(g, rows, total))
-        out[g] = {"total_s": total, "waypoints": rows}
+        print(ms.format_report(name, rows, total))
+        out[name] = {"total_s": total, "waypoints": rows}
     if args.output:
         write_text_atomic(args.output, json.dumps(out, indent=1))
     return 0
