@@ -206,3 +206,47 @@ def test_deepc_on_noise_free_linear_data_flies_the_model_based_mpcs_inputs():
     flown_a, planned_a = np.array(flown), np.array(planned)
     assert np.max(np.abs(flown_a - planned_a)) < 1e-4 * np.max(np.abs(planned_a))
     assert x[0] > 0.2  # the step was flown, not a trivial zero sequence
+
+
+def _payload_p_decay(length: float, vel_p: float, seconds: float = 12.0) -> float:
+    """Decay rate [1/s] of the swing under the core payload feedback when the cable hangs
+    from a point that flies exactly the commanded velocity (held over each tick): the
+    velocity change at a tick kicks θ̇ by −Δv cos θ / l, in between the pendulum swings
+    freely (RK4). From 0.1 rad; the rate is the slope of log(peak swing) over time."""
+    ctrl = _core.Controller.payload_p(length, 1, {"vel_p": vel_p, "wp_pos_p": 0.0})
+    dt, sub = ctrl.period, 10
+    h = dt / sub
+    th, w, v = 0.1, 0.0, 0.0
+    ctrl.reset(np.array([[v, th, w]]), [0.0])
+
+    def f(th: float, w: float) -> np.ndarray:
+        return np.array([w, -(G / length) * math.sin(th)])
+
+    swings = []
+    for _ in range(int(seconds / dt)):
+        swings.append(th)
+        nv = float(ctrl.step(np.array([[v, th, w]]), [0.0])[0])
+        w -= (nv - v) * math.cos(th) / length
+        v = nv
+        z = np.array([th, w])
+        for _ in range(sub):
+            k1 = f(*z)
+            k2 = f(*(z + h / 2 * k1))
+            k3 = f(*(z + h / 2 * k2))
+            k4 = f(*(z + h * k3))
+            z = z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        th, w = float(z[0]), float(z[1])
+    s = np.array(swings)
+    peaks = [i for i in range(1, len(s) - 1) if s[i - 1] < s[i] >= s[i + 1] and s[i] > 0]
+    assert len(peaks) >= 4
+    return -float(np.polyfit(dt * np.array(peaks), np.log(s[peaks]), 1)[0])
+
+
+@pytest.mark.parametrize(("length", "vel_p"), [(1.0, 0.1), (1.5, 0.2)])
+def test_payload_p_damps_the_swing_at_the_closed_form_rate(length, vel_p):
+    # ArduPilot's law moves the vehicle by v = −K_v a_p with the payload's acceleration
+    # a_p = −g tan θ (payload North of the vehicle: it accelerates South, the vehicle goes
+    # North). A hanging point that follows it exactly makes θ̈ + (K_v g / l) θ̇ + (g/l) θ = 0
+    # (linearised): the swing decays at K_v g / (2 l), whatever ω. A flipped sign grows
+    # instead, a lost g or a swing in degrees is off by an order of magnitude.
+    assert _payload_p_decay(length, vel_p) == pytest.approx(vel_p * G / (2 * length), rel=0.05)
