@@ -41,22 +41,29 @@ def estimator(drag: bool) -> dict[str, Any]:
     return est
 
 
+def train(training: float, est: dict[str, Any]) -> tuple[dict[str, Any], dict[str, float]]:
+    """The models identified from the random-step flight (seed 0): DMDc on the sensor and on
+    the IMU estimate as the swing column, by name, and the white-box LQR parameters."""
+    flight = swingrt.collect({"sensors": {"estimator": est}}, duration=training, seed=0)
+    models = {"sensor": search(flight, axes="n").model}
+    blind = Trace({k: np.asarray(flight[k]) for k in flight.columns}, dict(flight.meta))
+    blind["swing_n"] = np.asarray(flight["swing_est_n"])
+    blind["swing_e"] = np.asarray(flight["swing_est_e"])
+    models["imu"] = search(blind, axes="n").model
+    wb = identify(flight, method="whitebox", axes="n").diagnostics["whitebox"]
+    lqr = {k: float(wb[w]) for k, w in (("m_q", "vehicle_mass"), ("m_p", "payload_mass"))}
+    lqr["l"] = float(wb["length"])
+    lqr["c"] = float(wb.get("friction", 0.0))
+    return models, lqr
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--training", type=float, default=150.0)
     ap.add_argument("--drag", action="store_true", help="the estimator removes modelled drag")
     a = ap.parse_args()
     est = estimator(a.drag)
-    train = swingrt.collect({"sensors": {"estimator": est}}, duration=a.training, seed=0)
-    models = {"sensor": search(train, axes="n").model}
-    blind = Trace({k: np.asarray(train[k]) for k in train.columns}, dict(train.meta))
-    blind["swing_n"] = np.asarray(train["swing_est_n"])
-    blind["swing_e"] = np.asarray(train["swing_est_e"])
-    models["imu"] = search(blind, axes="n").model
-    wb = identify(train, method="whitebox", axes="n").diagnostics["whitebox"]
-    lqr = {k: float(wb[w]) for k, w in (("m_q", "vehicle_mass"), ("m_p", "payload_mass"))}
-    lqr["l"] = float(wb["length"])
-    lqr["c"] = float(wb.get("friction", 0.0))
+    models, lqr = train(a.training, est)
     for k, m in models.items():
         print(
             f"model {k}: q = {m.delays}, p = {m.rank}, test NMAE {m.diagnostics.get('test_nmae')}"

@@ -375,7 +375,8 @@ impl SwingController for Recorder {
 /// The default step (2 m/s North at 2 s) flown with the swing source `source`, an ideal IMU,
 /// no airframe drag and the estimator's exact pull scale, so that what separates the rate a
 /// controller is told from the true one is the measurement chain's lag. Returns per
-/// controller tick (every 10 ms from 0, the trace's rows): (told swing, told rate, true rate).
+/// controller tick (every 10 ms, the trace's rows, from the tick it engages on to the end):
+/// (told swing, told rate, true rate).
 fn told_swing(source: SwingSource, cutoff: f64) -> Vec<[f64; 3]> {
     let mut sc = Scenario::builtin("step").unwrap();
     sc.duration = 8.0;
@@ -395,18 +396,22 @@ fn told_swing(source: SwingSource, cutoff: f64) -> Vec<[f64; 3]> {
     let tr = sim.take_trace();
     let truth = tr.column("swing_rate_n").unwrap();
     let seen = seen.lock().unwrap();
+    // The last tick is the last row but one (the final row is logged after the run); a
+    // controller on the IMU engages only after the estimator's tare.
+    let first = truth.len() - 1 - seen.len();
     seen.iter()
-        .zip(truth)
+        .zip(&truth[first..])
         .map(|(s, r)| [s[0], s[1], *r])
         .collect()
 }
 
 /// The delay [s] (1 ms grid, 0–150 ms) that best aligns `told` rates with the `truth`
-/// (10 ms samples, interpolated) after the step, and the RMS errors at it and at 0 [rad/s].
+/// (10 ms samples, interpolated) over the last 4.5 s (after the step), and the RMS errors at
+/// it and at 0 [rad/s].
 fn best_lag(rows: &[[f64; 3]]) -> (f64, f64, f64) {
     let rms = |lag: f64| {
         let (mut s, mut n) = (0.0, 0.0);
-        for k in 300..rows.len() {
+        for k in rows.len() - 450..rows.len() {
             let x = k as f64 - lag / 0.01;
             let (i, f) = (x.floor() as usize, x - x.floor());
             let r = rows[i][2] * (1.0 - f) + rows[(i + 1).min(k)][2] * f;
@@ -424,8 +429,10 @@ fn best_lag(rows: &[[f64; 3]]) -> (f64, f64, f64) {
 
 #[test]
 fn controllers_are_told_the_swing_rate_of_their_own_swing_source_not_the_truth() {
-    // A swing sensor's rate is the true one.
-    for r in told_swing(SwingSource::Sensor, 5.0) {
+    // A swing sensor's rate is the true one, from the first tick on.
+    let rows = told_swing(SwingSource::Sensor, 5.0);
+    assert_eq!(rows.len(), 800);
+    for r in rows {
         assert_eq!(r[1], r[2]);
     }
     // Without a sensor on the cable, the rate is the estimate's own filtered derivative: the
@@ -433,7 +440,9 @@ fn controllers_are_told_the_swing_rate_of_their_own_swing_source_not_the_truth()
     let fs = 100.0;
     let cutoff = 5.0;
     let rows = told_swing(SwingSource::Imu, cutoff);
-    for k in 301..rows.len() {
+    // (the controller engages at 1 s, once the estimator's 1 s tare is over)
+    assert_eq!(rows.len(), 700);
+    for k in 201..rows.len() {
         let d = (rows[k][0] - rows[k - 1][0]) * fs;
         assert!((rows[k][1] - d).abs() < 1e-9, "{k}: {} vs {d}", rows[k][1]);
     }

@@ -289,7 +289,9 @@ impl Simulator {
         Ok(sim)
     }
 
-    /// Replace PX4's velocity PID on the controller's axes from time `engage_at` [s] on.
+    /// Replace PX4's velocity PID on the controller's axes from time `engage_at` [s] on (with
+    /// the swing source `imu`, not before the estimator's tare is over: until then the
+    /// estimate reads the accelerometer's bias as swing).
     ///
     /// A tick whose compute time exceeds `budget` [s] or that fails hands the axes back to
     /// PX4's velocity PID for the rest of the run (logged as `fallback` = 1).
@@ -682,6 +684,11 @@ impl Simulator {
     }
 
     fn controller_tick(&mut self) {
+        let taring = self.sc.sensors.swing == SwingSource::Imu
+            && self.swing_est.as_ref().is_some_and(|e| !e.tared());
+        if taring {
+            return;
+        }
         let inputs = TickInputs {
             t: self.time(),
             swing: self.controller_swing(),
