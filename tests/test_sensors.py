@@ -9,6 +9,7 @@ import numpy as np
 
 import swingrt
 from swingrt import _core
+from swingrt.io.flight import Trace
 
 
 def test_hover_imu_reads_minus_g_and_the_estimate_follows_the_true_swing():
@@ -35,3 +36,38 @@ def test_hover_imu_reads_minus_g_and_the_estimate_follows_the_true_swing():
     )
     ratio = tr2["swing_est_n"][step].min() / est.min()
     assert 0.4 < ratio < 0.75
+
+
+def test_a_flight_without_a_swing_sensor_is_identified_on_the_imu_without_being_told(tmp_path, cli):
+    # A training flight with nothing on the cable: its swing columns are empty (NaN), the
+    # IMU estimate is logged. Written as a CSV log without swing columns (nor the scenario),
+    # `swingrt identify` is not told, and identifies on the estimate.
+    flight = swingrt.collect({"sensors": {"swing": "imu"}}, duration=80.0, seed=0)
+    assert np.isnan(flight["swing_n"]).all()
+    path = tmp_path / "blind.csv"
+    Trace({k: v for k, v in flight.columns.items() if k not in ("swing_n", "swing_e")}).to_csv(path)
+    r = cli("identify", path, "--delays", "10", "--rank", "12", "-o", tmp_path / "m.json")
+    assert r.returncode == 0, r.stderr
+    model = swingrt.LinearModel.load(tmp_path / "m.json")
+    assert model.states == ["vn", "swing_n"]
+    assert model.diagnostics["swing_source"] == "imu"
+    assert model.diagnostics["test_nmae"] < 0.1
+    # The same flight told its true swing is a sensor flight.
+    flight["swing_n"] = np.asarray(flight["swing_true_n"])
+    flight["swing_e"] = np.asarray(flight["swing_true_e"])
+    assert swingrt.sysid.swing_source(flight) == "sensor"
+    told = swingrt.sysid.identify(flight, delays=10, rank=12)
+    assert told.diagnostics["swing_source"] == "sensor"
+
+
+def test_run_swing_source_is_checked_in_one_line(cli):
+    r = cli("run", "--swing-source", "cable")
+    assert r.returncode == 2
+    assert len(r.stderr.strip().splitlines()) == 1
+    assert "--swing-source" in r.stderr and "'cable'" in r.stderr
+    r = cli("run", "--px4", "nowhere", "--swing-source", "imu")
+    assert r.returncode == 2
+    assert r.stderr.strip().splitlines() == [
+        "swingrt: error: --swing-source: only the swing sensor is flown on PX4 SITL so far "
+        "(run on the built-in simulator without --px4)"
+    ]

@@ -16,6 +16,11 @@ checks (``_core.identify_settings``: the keyword arguments below are its fields)
 held-out split, fit, search, scoring, white-box and the control-relevant selection. This
 module reads columns, resamples them onto the ``dt`` grid, smooths them when asked, and
 calls the core. Figures are in :mod:`swingrt.reports.plots`.
+
+A flight with no swing sensor (its ``swing_*`` columns absent or all NaN) that logs the
+swing estimated from the IMU (``swing_est_*``, see ``swing_core::sensors::swing``) is
+identified on that estimate without being told (:func:`swing_source`); the model records
+where its swing came from in ``diagnostics['swing_source']``.
 """
 
 from __future__ import annotations
@@ -46,6 +51,7 @@ __all__ = [
     "sweep_noise",
     "sweep_sample_time",
     "sweep_training_length",
+    "swing_source",
     "to_statespace",
 ]
 
@@ -153,6 +159,41 @@ def resample(
     return out
 
 
+def swing_source(data: Any) -> str:
+    """Where a flight's swing comes from: ``imu`` when it has no swing column with a value
+    (absent or all NaN) but a finite IMU estimate ``swing_est_n`` for every sample, else the
+    flight's scenario's ``sensors.swing`` (``sensor`` or ``body``; ``sensor`` when the
+    flight does not say)."""
+    cols = _columns(data)
+    sw = cols.get("swing_n")
+    if sw is None or not np.isfinite(np.asarray(sw, dtype=float)).any():
+        est = cols.get("swing_est_n")
+        if est is not None and len(est) and np.isfinite(np.asarray(est, dtype=float)).all():
+            return "imu"
+    meta = getattr(data, "meta", None) or {}
+    sensors = (meta.get("scenario") or {}).get("sensors") or {}
+    src = sensors.get("swing", "sensor")
+    return src if src in ("sensor", "body") else "sensor"
+
+
+def _swing_columns(data: Any) -> tuple[Mapping[str, Any], str]:
+    """The flight's columns with the swing the identification reads (the IMU estimate in
+    place of absent swing columns, see :func:`swing_source`), and its source."""
+    cols = _columns(data)
+    src = swing_source(data)
+    if src != "imu":
+        return cols, src
+    out = dict(cols)
+    for a in ("n", "e"):
+        if f"swing_est_{a}" in cols:
+            out[f"swing_{a}"] = cols[f"swing_est_{a}"]
+    return out, src
+
+
+def _with_source(model: LinearModel, source: str) -> LinearModel:
+    return model.with_diagnostics({"swing_source": source})
+
+
 def _axes(axes: str) -> tuple[list[str], list[str]]:
     if axes not in AXES:
         raise ConfigError(f"axes: must be one of {', '.join(AXES)}, not {axes!r}", field="axes")
@@ -164,7 +205,7 @@ def _prepare(
 ) -> tuple[np.ndarray, np.ndarray, list[str], list[str]]:
     """Resampled (and, with ``smooth``, smoothed) state and input columns of ``axes``."""
     states, inputs = _axes(axes)
-    given = _columns(data)
+    given, _ = _swing_columns(data)
     missing = [c for c in (*states, *inputs) if c not in given]
     if missing:
         hint = []
@@ -215,6 +256,7 @@ def search(
     x, u, states, inputs = _prepare(data, axes, s)
     model, found = _core.identify(x, u, states, inputs, s)
     table = found.table() if found is not None else []
+    model = _with_source(model, swing_source(data))
     return SearchResult(model=model, table=table, search=found, settings=s)
 
 
@@ -239,7 +281,7 @@ def identify(data: Any, *, axes: str = "n", **settings: Any) -> LinearModel:
     if s["method"] == "whitebox" and s["payload_mass"] is None:
         mass = estimate_payload_mass(data, vehicle_mass=s["vehicle_mass"], skip=s["test_span"])
     model, _ = _core.identify(x, u, states, inputs, s, payload_mass=mass)
-    return model
+    return _with_source(model, swing_source(data))
 
 
 def select_for_control(
@@ -308,6 +350,7 @@ def select_for_control(
     model, _passed = _core.select_for_control(
         x, u, states, inputs, s, result.search, plant, mpc_settings, selection, twin
     )
+    model = _with_source(model, swing_source(data))
     return SearchResult(model=model, table=result.table, search=result.search, settings=s)
 
 
@@ -434,7 +477,7 @@ def evaluate(
     Returns ``{"nmae": mean, "per_state": {name: nmae}}``."""
     if not (math.isfinite(rollout) and rollout > 0):
         raise ConfigError(f"rollout: must be a positive number of seconds, not {rollout}")
-    cols = resample(_columns(data), model.dt, names=[*model.states, *model.inputs])
+    cols = resample(_swing_columns(data)[0], model.dt, names=[*model.states, *model.inputs])
     x = np.column_stack([cols[s] for s in model.states])
     u = np.column_stack([cols[s] for s in model.inputs])
     if test_span is not None:
