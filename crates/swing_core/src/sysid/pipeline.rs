@@ -296,7 +296,11 @@ pub fn identify(
 ) -> Result<Identified, SysidError> {
     settings.validate()?;
     let (train, test) = split(traj, settings)?;
-    check_excitation(&train, inputs)?;
+    // The data-driven fits learn each input's effect from the data; the white-box takes it
+    // from physics.
+    if settings.method != IdentifyMethod::Whitebox {
+        check_excitation(&train, inputs)?;
+    }
     let (mut model, search_result) = match settings.method {
         IdentifyMethod::Whitebox => {
             let mass = settings.payload_mass.or(payload_mass).ok_or_else(|| {
