@@ -40,7 +40,7 @@ from typing import Any
 
 from swingrt.campaign.sampling import Distribution, parse_distribution
 from swingrt.errors import ConfigError
-from swingrt.experiments.runner import Experiment
+from swingrt.experiments.schema import Experiment
 
 _TOP_KEYS = {"name", "description", "samples", "seed", "controllers", "batch_size", "base", "vary"}
 _BASE_KEYS = {
