@@ -15,6 +15,7 @@ pub mod control;
 pub mod design;
 pub mod error;
 pub mod linalg;
+pub mod mission;
 pub mod plant;
 pub mod sim;
 pub mod sysid;

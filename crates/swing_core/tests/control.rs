@@ -787,6 +787,54 @@ fn mpc_and_lqr_ticks_allocate_nothing() {
 }
 
 #[test]
+fn tracking_mpc_ticks_with_their_preview_allocate_nothing() {
+    use swing_core::control::{TrackingMpc, TrackingSettings};
+    use swing_core::mission::{GuidanceSettings, Mission, PreviewBuffer};
+    let m = swing_core::testing::pendulum_delay_model(&params(0.3, 1.5), TS, 4, 2, 7).unwrap();
+    let mission = Mission::from_toml(
+        "acceptance_radius = 0.3\nhold = 2.0\n[[waypoint]]\nn = 20\ne = 0\nd = -10\n\
+         [[waypoint]]\nn = 20\ne = 15\nd = -10\n",
+    )
+    .unwrap();
+    let settings = TrackingSettings {
+        mpc: MpcSettings {
+            acc_max: Some(1.0),
+            ..swing_core::control::mpc::tracking::tracking_mpc_defaults()
+        },
+        ..TrackingSettings::default()
+    };
+    let mut ctrl = TrackingMpc::new(&m, settings).unwrap();
+    let mut g = GuidanceSettings::default().build(&mission).unwrap();
+    let mut buf = PreviewBuffer::new(ctrl.reference_steps(), 2);
+    let mut plant = LinearPlant::new(&m).unwrap();
+    let mut pos = [0.0, 0.0];
+    g.start(0.0, &[0.0, 0.0, -10.0], &[0.0; 3]);
+    let mut constrained = 0;
+    for k in 0..600 {
+        let t = k as f64 * TS;
+        let st = plant.state();
+        let mut u = [0.0; 2];
+        let mut info = None;
+        let n = counting::count(|| {
+            g.update(t, TS, &[pos[0], pos[1], -10.0], &[st[0].v, st[1].v, 0.0]);
+            let view = buf.fill(g.as_ref(), t, TS);
+            ctrl.observe_reference(&pos, &view);
+            info = Some(ctrl.step(&st, &[0.0, 0.0], &mut u).unwrap());
+        });
+        assert_eq!(n, 0, "tick {k} allocated {n} times");
+        if info.unwrap().kind == TickKind::Constrained {
+            constrained += 1;
+        }
+        plant.step(&u);
+        let after = plant.state();
+        for a in 0..2 {
+            pos[a] += 0.5 * TS * (st[a].v + after[a].v);
+        }
+    }
+    assert!(constrained > 0, "the 1 m/s² bound never bit");
+}
+
+#[test]
 fn a_horizon_shorter_than_the_swing_period_underdamps_a_two_metre_cable() {
     // With one fixed tuning, the prediction horizon must span a swing period of
     // the longest cable (≈ 2.5–2.8 s for 2 m); 1.8 s (60 ticks) leaves it under-damped.

@@ -26,7 +26,10 @@ use crate::errors::to_py;
 use crate::sysid::PyLinearModel;
 
 /// Read a state array of shape (axes, 3) — or (3,) for one axis — of [v, swing, swing_rate].
-fn read_state(arr: &PyReadonlyArrayDyn<'_, f64>, axes: usize) -> PyResult<Vec<AxisState>> {
+pub(crate) fn read_state(
+    arr: &PyReadonlyArrayDyn<'_, f64>,
+    axes: usize,
+) -> PyResult<Vec<AxisState>> {
     let shape = arr.shape().to_vec();
     let ok = (shape == [axes, 3]) || (axes == 1 && shape == [3]);
     if !ok {
@@ -46,7 +49,7 @@ fn read_state(arr: &PyReadonlyArrayDyn<'_, f64>, axes: usize) -> PyResult<Vec<Ax
 }
 
 /// A float or a sequence of floats of length `axes`.
-fn read_vec(obj: &Bound<'_, PyAny>, axes: usize, what: &str) -> PyResult<Vec<f64>> {
+pub(crate) fn read_vec(obj: &Bound<'_, PyAny>, axes: usize, what: &str) -> PyResult<Vec<f64>> {
     let v: Vec<f64> = match obj.extract::<f64>() {
         Ok(x) => vec![x],
         Err(_) => obj.extract::<Vec<f64>>()?,
@@ -60,7 +63,7 @@ fn read_vec(obj: &Bound<'_, PyAny>, axes: usize, what: &str) -> PyResult<Vec<f64
     Ok(v)
 }
 
-fn tick_dict<'py>(py: Python<'py>, info: TickInfo) -> PyResult<Bound<'py, PyDict>> {
+pub(crate) fn tick_dict<'py>(py: Python<'py>, info: TickInfo) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     let kind = match info.kind {
         TickKind::Unconstrained => "unconstrained",
@@ -71,7 +74,7 @@ fn tick_dict<'py>(py: Python<'py>, info: TickInfo) -> PyResult<Bound<'py, PyDict
     Ok(d)
 }
 
-fn step_any(
+pub(crate) fn step_any(
     ctrl: &mut dyn SwingController,
     state: &PyReadonlyArrayDyn<'_, f64>,
     vel_ref: &Bound<'_, PyAny>,
@@ -84,7 +87,7 @@ fn step_any(
     Ok((out, info))
 }
 
-fn reset_any(
+pub(crate) fn reset_any(
     ctrl: &mut dyn SwingController,
     state: &PyReadonlyArrayDyn<'_, f64>,
     acc: Option<&Bound<'_, PyAny>>,

@@ -9,6 +9,8 @@ mod control;
 mod convert;
 mod errors;
 mod hil;
+mod methods;
+mod mission;
 mod sim;
 mod sysid;
 
@@ -21,5 +23,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     hil::register(m)?;
     sysid::register(m)?;
     control::register(m)?;
+    methods::register(m)?;
+    mission::register(m)?;
     Ok(())
 }

@@ -356,6 +356,43 @@ impl PySimulator {
             .map_err(to_py)
     }
 
+    /// Fly a core `Controller` (`shaper`, `payload_p`, `deepc`) from `engage_at` [s] with
+    /// `budget` [s] per tick before fallback; the simulator takes it over.
+    #[pyo3(signature = (controller, engage_at, budget))]
+    fn attach(
+        &mut self,
+        controller: &mut crate::methods::PyController,
+        engage_at: f64,
+        budget: f64,
+    ) -> PyResult<()> {
+        let ctrl = controller.take()?;
+        self.sim_mut()
+            .attach_controller(ctrl, engage_at, budget)
+            .map_err(to_py)
+    }
+
+    /// Fly a Python controller object (`reset(state, acc)`, `step(state, vel_ref)` with
+    /// state an (axes, 3) array of [v, swing, swing_rate]) on `axes` axes every `period` [s]
+    /// under the same supervisor: `output` is `acceleration` (in place of PX4's velocity
+    /// PID) or `velocity` (a setpoint PX4's PID tracks); a Python exception, a late tick
+    /// (over `budget` [s]) or a non-finite command hands the axes back to PX4.
+    #[pyo3(signature = (controller, axes, period, output, engage_at, budget))]
+    fn attach_python(
+        &mut self,
+        controller: Py<PyAny>,
+        axes: usize,
+        period: f64,
+        output: &str,
+        engage_at: f64,
+        budget: f64,
+    ) -> PyResult<()> {
+        let ctrl = crate::methods::PythonController::new(controller, axes, period, output)
+            .map_err(to_py)?;
+        self.sim_mut()
+            .attach_controller(Box::new(ctrl), engage_at, budget)
+            .map_err(to_py)
+    }
+
     /// Events of the attached controller so far as (time [s], what, value) tuples, e.g. the
     /// adaptive MPC's `detected`, `requested`, `adopted` and `rejected`.
     fn controller_events(&self) -> Vec<(f64, String, f64)> {
@@ -382,6 +419,59 @@ impl PySimulator {
         let lqr = LqrController::new(params, axes, settings).map_err(to_py)?;
         self.sim_mut()
             .attach_controller(Box::new(lqr), engage_at, budget)
+            .map_err(to_py)
+    }
+
+    /// Fly `mission` from `start_at` [s] with the guidance of `guidance` settings (a dict of
+    /// `GuidanceSettings` fields; mode `smooth` — swingrt's legs — or `px4` — PX4's mission
+    /// behaviour): its trajectory setpoint replaces the scenario's setpoints on every axis.
+    #[pyo3(signature = (mission, guidance=None, start_at=0.0))]
+    fn fly_mission(
+        &mut self,
+        mission: &crate::mission::PyMission,
+        guidance: Option<&Bound<'_, PyAny>>,
+        start_at: f64,
+    ) -> PyResult<()> {
+        let s: swing_core::mission::GuidanceSettings =
+            crate::convert::settings(guidance, "guidance")?;
+        let g = s
+            .build(&mission.inner)
+            .map_err(|e| to_py(crate::convert::within(e, "guidance")))?;
+        self.sim_mut().fly_mission(g, start_at).map_err(to_py)
+    }
+
+    /// Whether the mission flown is complete.
+    #[getter]
+    fn mission_done(&self) -> bool {
+        self.sim().mission_done()
+    }
+
+    /// The mission's events so far as (time [s], item index, kind) with kind `started`,
+    /// `reached`, `left` or `completed`.
+    fn mission_events(&self) -> Vec<(f64, usize, String)> {
+        self.sim()
+            .mission_events()
+            .iter()
+            .map(|e| (e.t, e.item, e.kind.name().to_string()))
+            .collect()
+    }
+
+    /// Fly the position-tracking MPC with preview (`control::mpc::tracking`) on an
+    /// identified model with `tracking` settings from `engage_at` [s]; it tracks the mission
+    /// flown (`fly_mission`) and engages when the mission starts.
+    #[pyo3(signature = (model, tracking, engage_at, budget))]
+    fn attach_tracking_mpc(
+        &mut self,
+        model: &PyLinearModel,
+        tracking: Option<&Bound<'_, PyAny>>,
+        engage_at: f64,
+        budget: f64,
+    ) -> PyResult<()> {
+        let tracking: swing_core::control::TrackingSettings =
+            crate::convert::settings(tracking, "tracking")?;
+        let mpc = swing_core::control::TrackingMpc::new(&model.inner, tracking).map_err(to_py)?;
+        self.sim_mut()
+            .attach_controller(Box::new(mpc), engage_at, budget)
             .map_err(to_py)
     }
 

@@ -347,8 +347,8 @@ impl<'py> Columns<'py> {
 }
 
 /// Check a settings section against its core struct and return it with every default
-/// filled in: `identify`, `mpc`, `lqr` or `selection` (`ConfigError` naming
-/// `section.field`).
+/// filled in: `identify`, `mpc`, `lqr`, `selection`, `adaptive`, `shaper`, `payload_p`,
+/// `deepc`, `tracking`, `guidance` or `random_plan` (`ConfigError` naming `section.field`).
 #[pyfunction]
 #[pyo3(signature = (section, settings=None))]
 fn check_settings<'py>(
@@ -385,9 +385,47 @@ fn check_settings<'py>(
             s.validate().map_err(within)?;
             to_py_object(py, &s)
         }
+        "shaper" => {
+            let s: swing_core::control::ShaperSettings =
+                crate::convert::settings(settings, section)?;
+            s.validate().map_err(within)?;
+            to_py_object(py, &s)
+        }
+        "payload_p" => {
+            let s: swing_core::control::PayloadPSettings =
+                crate::convert::settings(settings, section)?;
+            s.validate().map_err(within)?;
+            to_py_object(py, &s)
+        }
+        "deepc" => {
+            let s: swing_core::control::DeepcSettings =
+                crate::convert::settings(settings, section)?;
+            s.validate().map_err(within)?;
+            to_py_object(py, &s)
+        }
+        "tracking" => {
+            let s: swing_core::control::TrackingSettings =
+                crate::convert::settings(settings, section)?;
+            s.validate().map_err(within)?;
+            to_py_object(py, &s)
+        }
+        "guidance" => {
+            let s: swing_core::mission::GuidanceSettings =
+                crate::convert::settings(settings, section)?;
+            s.validate().map_err(within)?;
+            to_py_object(py, &s)
+        }
+        "random_plan" => {
+            let s: swing_core::mission::RandomPlan = crate::convert::settings(settings, section)?;
+            s.validate().map_err(within)?;
+            to_py_object(py, &s)
+        }
         other => Err(raise(
             Category::Config,
-            format!("unknown settings section {other:?} (identify, mpc, lqr, selection, adaptive)"),
+            format!(
+                "unknown settings section {other:?} (identify, mpc, lqr, selection, adaptive, \
+                 shaper, payload_p, deepc, tracking, guidance, random_plan)"
+            ),
         )),
     }
 }

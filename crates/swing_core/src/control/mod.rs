@@ -10,16 +10,46 @@ use thiserror::Error;
 
 use crate::error::{Categorized, Category};
 
+pub mod deepc;
 pub mod layout;
 pub mod lqr;
 pub mod mpc;
+pub mod payload_p;
 pub mod plant;
+pub mod shaper;
 
 pub use crate::plant::AxisState;
+pub use deepc::{DeepcController, DeepcSettings};
 pub use layout::{AxisColumns, AxisLayout, Measured};
 pub use lqr::{LqrController, LqrSettings};
+pub use mpc::tracking::{TrackTarget, TrackingMpc, TrackingSettings};
 pub use mpc::{MpcController, MpcSettings, QpSolverKind};
+pub use payload_p::{PayloadP, PayloadPSettings};
 pub use plant::LinearPlant;
+pub use shaper::{InputShaper, ShaperKind, ShaperSettings, SwingMode};
+
+/// A reference trajectory over the coming ticks for controllers that track a position with
+/// preview: per step k (k = 0 is now, then every controller tick) and horizontal axis
+/// (North, East) the reference position [m], velocity [m/s], acceleration [m/s²] and jerk
+/// [m/s³], and the acceleration bound of the leg flown now.
+#[derive(Clone, Copy, Debug)]
+pub struct ReferencePreview<'a> {
+    /// Number of steps (k = 0 … steps − 1).
+    pub steps: usize,
+    /// Number of axes in `data`.
+    pub axes: usize,
+    /// `data[(k · axes + axis) · 4 + c]`, c = 0 position, 1 velocity, 2 acceleration, 3 jerk.
+    pub data: &'a [f64],
+    /// Acceleration bound of the leg flown now [m/s²] (none: the controller's own).
+    pub acc_limit: Option<f64>,
+}
+
+impl ReferencePreview<'_> {
+    /// Channel `c` (0 position, 1 velocity, 2 acceleration, 3 jerk) of `axis` at step `k`.
+    pub fn get(&self, k: usize, axis: usize, c: usize) -> f64 {
+        self.data[(k * self.axes + axis) * 4 + c]
+    }
+}
 
 /// Something a controller did that a flight log should show (e.g. a model re-adopted).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -41,6 +71,17 @@ pub enum TickKind {
     Unconstrained,
     /// A constrained QP was solved.
     Constrained,
+}
+
+/// What a controller's output replaces in PX4's cascade.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ControlOutput {
+    /// An acceleration setpoint [m/s²] in place of PX4's velocity PID (MPC, LQR, DeePC).
+    #[default]
+    Acceleration,
+    /// A velocity setpoint [m/s] that PX4's own velocity PID then tracks (input shaper,
+    /// payload feedback on the velocity setpoint).
+    Velocity,
 }
 
 /// What one controller tick did, for logging.
@@ -136,9 +177,14 @@ pub trait SwingController: Send {
     fn axes(&self) -> usize;
     /// Tick period [s]; the runner calls [`SwingController::step`] at this rate.
     fn period(&self) -> f64;
+    /// What the output of [`SwingController::step`] is (default: an acceleration setpoint).
+    fn output(&self) -> ControlOutput {
+        ControlOutput::Acceleration
+    }
     /// Start from the given measured state and acceleration setpoint (bumpless transfer).
     fn reset(&mut self, state: &[AxisState], acc: &[f64]);
-    /// One tick: measured state and velocity reference in, acceleration setpoint [m/s²] out.
+    /// One tick: measured state and velocity reference in, acceleration setpoint [m/s²] out
+    /// (or a velocity setpoint [m/s] when [`SwingController::output`] says so).
     fn step(
         &mut self,
         state: &[AxisState],
@@ -157,6 +203,16 @@ pub trait SwingController: Send {
     /// [N] and the down velocity [m/s] (payload mass estimates); called before
     /// [`SwingController::step`] where the runner knows them. The default ignores them.
     fn observe_vertical(&mut self, _thrust_vertical: f64, _vd: f64) {}
+    /// Steps of reference a controller that tracks a position with preview wants before each
+    /// tick (see [`SwingController::observe_reference`]); 0 (the default) for controllers
+    /// that track the velocity reference of [`SwingController::step`].
+    fn reference_steps(&self) -> usize {
+        0
+    }
+    /// The measured horizontal position [m] (one per axis) and the reference over the
+    /// coming ticks, given before each [`SwingController::step`] while a trajectory is flown
+    /// to controllers with [`SwingController::reference_steps`] > 0. The default ignores them.
+    fn observe_reference(&mut self, _position: &[f64], _preview: &ReferencePreview<'_>) {}
     /// Events so far (see [`ControllerEvent`]); empty for controllers without any. Not for
     /// the real-time path.
     fn events(&self) -> Vec<ControllerEvent> {

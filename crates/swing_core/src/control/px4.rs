@@ -166,6 +166,16 @@ pub enum AxisSetpoint {
     Velocity(f64),
     /// Command an acceleration directly [m/s²] (velocity PID bypassed on this axis).
     Acceleration(f64),
+    /// Follow a trajectory: position [m] with velocity [m/s] and acceleration [m/s²]
+    /// feed-forward (PX4's auto modes: v_sp = v + P (p − p̂), a_sp = a + PID(v_sp − v̂)).
+    Trajectory {
+        /// Position [m].
+        p: f64,
+        /// Velocity feed-forward [m/s].
+        v: f64,
+        /// Acceleration feed-forward [m/s²].
+        a: f64,
+    },
 }
 
 impl AxisSetpoint {
@@ -175,6 +185,7 @@ impl AxisSetpoint {
             AxisSetpoint::Position(_) => "pos",
             AxisSetpoint::Velocity(_) => "vel",
             AxisSetpoint::Acceleration(_) => "acc",
+            AxisSetpoint::Trajectory { .. } => "traj",
         }
     }
 }
@@ -335,14 +346,19 @@ impl Px4Cascade {
         }
         self.vel_prev = Some(*vel);
 
-        // Position P → velocity setpoint; feed-through of velocity setpoints.
+        // Position P → velocity setpoint; feed-through of velocity setpoints; acceleration
+        // feed-forward (alone on acceleration axes, added to the PID's on trajectories).
         let mut vel_sp = Vector3::repeat(f64::NAN);
-        let mut acc_ff = Vector3::repeat(f64::NAN);
+        let mut acc_ff = Vector3::zeros();
         for i in 0..3 {
             match sp.axes[i] {
                 AxisSetpoint::Position(x) => vel_sp[i] = (x - pos[i]) * p.pos_p[i],
                 AxisSetpoint::Velocity(v) => vel_sp[i] = v,
                 AxisSetpoint::Acceleration(a) => acc_ff[i] = a,
+                AxisSetpoint::Trajectory { p: x, v, a } => {
+                    vel_sp[i] = v + (x - pos[i]) * p.pos_p[i];
+                    acc_ff[i] = a;
+                }
             }
         }
         // Velocity limits (PX4 constrains the position-loop output).
@@ -372,8 +388,9 @@ impl Px4Cascade {
         for i in 0..3 {
             if vel_sp[i].is_finite() {
                 vel_err[i] = vel_sp[i] - vel[i];
-                acc_sp[i] =
-                    vel_err[i] * p.vel_p[i] + self.vel_int[i] - self.vel_dot[i] * p.vel_d[i];
+                acc_sp[i] = vel_err[i] * p.vel_p[i] + self.vel_int[i]
+                    - self.vel_dot[i] * p.vel_d[i]
+                    + acc_ff[i];
             } else {
                 acc_sp[i] = acc_ff[i];
             }

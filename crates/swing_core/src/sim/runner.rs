@@ -19,6 +19,7 @@ use crate::config::ConfigError;
 use crate::control::px4::{AxisSetpoint, Px4Cascade, Setpoint};
 use crate::control::SwingController;
 use crate::error::{Categorized, Category};
+use crate::mission::{Guidance, MissionEvent};
 use crate::plant::dynamics::swing_angles;
 use crate::plant::{Effects, Model, PayloadKind, PlantState, StepInput, Wind};
 
@@ -163,6 +164,9 @@ pub struct Simulator {
     meas_vel: Vector3<f64>,
     acc_bias: Vector3<f64>,
     supervisor: ControllerSupervisor,
+    /// The mission's guidance, when one is flown, and its start time [s].
+    guidance: Option<(Box<dyn Guidance>, f64)>,
+    guidance_started: bool,
     trace: Trace,
     row: Vec<f64>,
 }
@@ -234,6 +238,8 @@ impl Simulator {
             meas_vel: Vector3::zeros(),
             acc_bias,
             supervisor: ControllerSupervisor::default(),
+            guidance: None,
+            guidance_started: false,
             trace: Trace::new(&names, rows),
             row: vec![0.0; names.len()],
             fc,
@@ -256,6 +262,30 @@ impl Simulator {
         self.supervisor
             .attach(ctrl, engage_at, budget, self.h, self.step)?;
         Ok(())
+    }
+
+    /// Fly a mission: from time `start_at` [s] on, the guidance's trajectory setpoint
+    /// replaces the scenario's setpoints on all three axes at every position-loop tick
+    /// (PX4's cascade flies it, or the attached swing controller tracks it).
+    pub fn fly_mission(
+        &mut self,
+        guidance: Box<dyn Guidance>,
+        start_at: f64,
+    ) -> Result<(), SimError> {
+        crate::config::non_negative("mission.start_at", start_at)?;
+        self.guidance = Some((guidance, start_at));
+        self.guidance_started = false;
+        Ok(())
+    }
+
+    /// Whether the mission flown is complete (false without one).
+    pub fn mission_done(&self) -> bool {
+        self.guidance.as_ref().is_some_and(|(g, _)| g.done())
+    }
+
+    /// The mission's events so far (empty without one).
+    pub fn mission_events(&self) -> &[MissionEvent] {
+        self.guidance.as_ref().map_or(&[], |(g, _)| g.events())
     }
 
     /// Predicted outputs of the attached controller's last tick, if it predicts.
@@ -412,6 +442,7 @@ impl Simulator {
         let pos_due = self.tick_pos.due();
         if pos_due {
             self.measure_translation();
+            self.guidance_tick();
         }
         if self.supervisor.due() {
             self.controller_tick();
@@ -451,6 +482,32 @@ impl Simulator {
         Ok(())
     }
 
+    /// One position-loop tick of the mission's guidance: its setpoint on every axis.
+    fn guidance_tick(&mut self) {
+        let t = self.time();
+        let dt = self.tick_pos.div() as f64 * self.h;
+        let Some((g, start_at)) = self.guidance.as_mut() else {
+            return;
+        };
+        if t + 1e-9 < *start_at {
+            return;
+        }
+        let pos: [f64; 3] = self.meas_pos.into();
+        let vel: [f64; 3] = self.meas_vel.into();
+        if !self.guidance_started {
+            g.start(t, &pos, &vel);
+            self.guidance_started = true;
+        }
+        let sp = g.update(t, dt, &pos, &vel);
+        for i in 0..3 {
+            self.sp.axes[i] = AxisSetpoint::Trajectory {
+                p: sp.p[i],
+                v: sp.v[i],
+                a: sp.a[i],
+            };
+        }
+    }
+
     fn measure_translation(&mut self) {
         self.meas_pos = self.state.pos;
         self.meas_vel = self.state.vel;
@@ -475,6 +532,10 @@ impl Simulator {
             vel: &self.meas_vel,
             px4: &self.sc.controller,
             thrust_vertical: self.thrust_vertical(),
+            guidance: match (&self.guidance, self.guidance_started) {
+                (Some((g, _)), true) => Some(g.as_ref()),
+                _ => None,
+            },
         };
         self.supervisor.tick(&inputs, &mut self.sp, &mut self.fc);
     }

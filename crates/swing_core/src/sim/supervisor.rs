@@ -11,7 +11,8 @@ use super::runner::TickStats;
 use super::ticker::Ticker;
 use crate::config::{non_negative, positive, ConfigError};
 use crate::control::px4::{AxisSetpoint, Px4Cascade, Px4Params, Setpoint};
-use crate::control::{AxisState, SwingController, TickKind};
+use crate::control::{AxisState, ControlOutput, SwingController, TickKind};
+use crate::mission::{Guidance, PreviewBuffer};
 
 /// An attached controller and its schedule.
 struct Attached {
@@ -20,12 +21,16 @@ struct Attached {
     budget: f64,
     engage_at: f64,
     started: bool,
-    /// Last accepted acceleration command per axis [m/s²].
+    /// What the controller's command replaces.
+    output: ControlOutput,
+    /// Last accepted command per axis: acceleration [m/s²] or velocity [m/s] (`output`).
     acc: [f64; 2],
     /// Velocity reference of the last tick per axis [m/s].
     vel_ref: [f64; 2],
     /// Time of the reset tick [s] (the controller counts ticks from it).
     t_start: f64,
+    /// The guidance's preview for a controller that tracks a position (sized at attach).
+    preview: PreviewBuffer,
 }
 
 /// What a controller tick reads from the simulation.
@@ -44,6 +49,8 @@ pub(crate) struct TickInputs<'a> {
     pub px4: &'a Px4Params,
     /// Rotor thrust projected on the vertical (up) [N].
     pub thrust_vertical: f64,
+    /// The mission's guidance, once a mission is flown.
+    pub guidance: Option<&'a dyn Guidance>,
 }
 
 /// The swing controller's supervisor (see module docs); without a controller it does nothing.
@@ -83,7 +90,12 @@ impl ControllerSupervisor {
         }
         non_negative("controller.engage_at", engage_at)?;
         positive("controller.budget", budget)?;
+        let output = ctrl.output();
+        let ref_steps = ctrl.reference_steps();
+        let axes = ctrl.axes();
         self.attached = Some(Attached {
+            output,
+            preview: PreviewBuffer::new(ref_steps, axes),
             ctrl,
             ticker: Ticker::at_step(steps.round() as u64, step),
             budget,
@@ -148,21 +160,27 @@ impl ControllerSupervisor {
         }
     }
 
-    /// Replace the controlled axes' setpoints by the controller's acceleration while active.
+    /// Replace the controlled axes' setpoints by the controller's command while active: an
+    /// acceleration, or a velocity setpoint PX4's velocity PID tracks.
     pub(crate) fn override_setpoint(&self, sp: &mut Setpoint) {
         if let (true, Some(a)) = (self.active, &self.attached) {
             for i in 0..a.ctrl.axes() {
-                sp.axes[i] = AxisSetpoint::Acceleration(a.acc[i]);
+                sp.axes[i] = match a.output {
+                    ControlOutput::Acceleration => AxisSetpoint::Acceleration(a.acc[i]),
+                    ControlOutput::Velocity => AxisSetpoint::Velocity(a.acc[i]),
+                };
             }
         }
     }
 
     /// Replace the controlled axes' velocity setpoints by the controller's reference while
-    /// active (for the trace).
+    /// active (for the trace); a velocity-output controller's own setpoint is PX4's already.
     pub(crate) fn override_velocity(&self, vel_sp: &mut Vector3<f64>) {
         if let (true, Some(a)) = (self.active, &self.attached) {
-            for i in 0..a.ctrl.axes() {
-                vel_sp[i] = a.vel_ref[i];
+            if a.output == ControlOutput::Acceleration {
+                for i in 0..a.ctrl.axes() {
+                    vel_sp[i] = a.vel_ref[i];
+                }
             }
         }
     }
@@ -191,13 +209,28 @@ impl ControllerSupervisor {
                 AxisSetpoint::Velocity(v) => v,
                 AxisSetpoint::Position(x) => ((x - inp.pos[i]) * inp.px4.pos_p[i])
                     .clamp(-inp.px4.vel_max_xy, inp.px4.vel_max_xy),
+                AxisSetpoint::Trajectory { p, v, .. } => (v + (p - inp.pos[i]) * inp.px4.pos_p[i])
+                    .clamp(-inp.px4.vel_max_xy, inp.px4.vel_max_xy),
                 AxisSetpoint::Acceleration(_) => 0.0,
             };
+        }
+        if a.preview.steps() > 0 {
+            // A controller that tracks a trajectory engages with the mission.
+            let Some(g) = inp.guidance else {
+                return;
+            };
+            let period = a.ctrl.period();
+            let view = a.preview.fill(g, t, period);
+            a.ctrl
+                .observe_reference(&[inp.pos[0], inp.pos[1]][..axes], &view);
         }
         if !a.started {
             let acc = [fc.acc_sp.x, fc.acc_sp.y];
             a.ctrl.reset(&states[..axes], &acc[..axes]);
-            a.acc = acc;
+            a.acc = match a.output {
+                ControlOutput::Acceleration => acc,
+                ControlOutput::Velocity => vel_ref,
+            };
             a.started = true;
             a.t_start = t;
         }
@@ -234,11 +267,14 @@ impl ControllerSupervisor {
                 self.active = true;
             }
             Some(r) => {
-                // Bumpless hand-back: PX4's velocity integrator takes the last command.
+                // Bumpless hand-back: PX4's velocity integrator takes the last acceleration
+                // command (a velocity-output controller never replaced PX4's PID).
                 for i in 0..axes {
-                    let err = vel_ref[i] - inp.vel[i];
-                    let v = a.acc[i] - err * inp.px4.vel_p[i];
-                    fc.set_velocity_integrator(i, v);
+                    if a.output == ControlOutput::Acceleration {
+                        let err = vel_ref[i] - inp.vel[i];
+                        let v = a.acc[i] - err * inp.px4.vel_p[i];
+                        fc.set_velocity_integrator(i, v);
+                    }
                     sp.axes[i] = AxisSetpoint::Velocity(vel_ref[i]);
                 }
                 self.active = false;

@@ -99,6 +99,16 @@ impl ActiveSetQp {
         })
     }
 
+    /// Change the bound values (of the kinds the solver was built with: a bound that was
+    /// absent stays absent); they apply from the next solve.
+    pub fn set_bounds(&mut self, bounds: Bounds) {
+        if bounds.u_max.is_some() == self.bounds.u_max.is_some()
+            && bounds.du_max.is_some() == self.bounds.du_max.is_some()
+        {
+            self.bounds = bounds;
+        }
+    }
+
     #[inline]
     fn slack(&self, i: usize, x: &[f64]) -> f64 {
         let [(c0, v0), (c1, v1)] = self.rows[i];

@@ -10,7 +10,10 @@
 //! [`crate::linalg::dare`] on (Aᵀ, Cᵀ, W, V)); the filter gain is
 //! L = P Cᵀ (C P Cᵀ + V)⁻¹. Each tick: ξ̂_{k|k} = ξ̂_{k|k−1} + L (y_k − C ξ̂_{k|k−1}), and after
 //! the input is chosen ξ̂_{k+1|k} = A ξ̂_{k|k} + B u_k + c̃. Both steps are matrix–vector
-//! products into preallocated buffers (no allocation per tick).
+//! products into preallocated buffers (no allocation per tick). Most rows of A only copy
+//! one entry (the delay shift, the lagged swings, the constant disturbances): they are
+//! found once and the prediction copies them, so its cost is that of the few dense rows
+//! (the newest frame, a position), not of the whole square A.
 
 use nalgebra::{DMatrix, DVector};
 
@@ -20,15 +23,44 @@ use crate::linalg::dare;
 /// A steady-state (constant-gain) Kalman filter with measured block C = [I_ny 0].
 #[derive(Clone, Debug)]
 pub struct SteadyStateKalman {
-    a: DMatrix<f64>,
-    b: DMatrix<f64>,
-    c_tilde: DVector<f64>,
     gain: DMatrix<f64>,
     p: DMatrix<f64>,
     ny: usize,
     prior: DVector<f64>,
     post: DVector<f64>,
     innov: DVector<f64>,
+    /// Rows of A that copy one entry of ξ unchanged: (row, source).
+    copies: Vec<(usize, usize)>,
+    /// The other rows, their A, B and c̃ rows, and a buffer for their values.
+    dense_rows: Vec<usize>,
+    a_dense: DMatrix<f64>,
+    b_dense: DMatrix<f64>,
+    c_dense: DVector<f64>,
+    dense_values: DVector<f64>,
+}
+
+/// Rows of (A, B, c̃) that copy one entry of the state (a single 1 in A, nothing else) as
+/// (row, source), and the other rows.
+fn split_rows(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    c: &DVector<f64>,
+) -> (Vec<(usize, usize)>, Vec<usize>) {
+    let mut copies = Vec::new();
+    let mut dense = Vec::new();
+    for r in 0..a.nrows() {
+        let nonzero: Vec<usize> = (0..a.ncols()).filter(|&j| a[(r, j)] != 0.0).collect();
+        let is_copy = nonzero.len() == 1
+            && a[(r, nonzero[0])] == 1.0
+            && c[r] == 0.0
+            && b.row(r).iter().all(|x| *x == 0.0);
+        if is_copy {
+            copies.push((r, nonzero[0]));
+        } else {
+            dense.push(r);
+        }
+    }
+    (copies, dense)
 }
 
 impl SteadyStateKalman {
@@ -70,13 +102,20 @@ impl SteadyStateKalman {
             })?
             .solve(&pct.transpose());
         let gain = lt.transpose();
+        let (copies, dense_rows) = split_rows(&a, &b, &c_tilde);
+        let a_dense = a.select_rows(dense_rows.iter());
+        let b_dense = b.select_rows(dense_rows.iter());
+        let c_dense = c_tilde.select_rows(dense_rows.iter());
         Ok(Self {
+            dense_values: DVector::zeros(dense_rows.len()),
+            copies,
+            dense_rows,
+            a_dense,
+            b_dense,
+            c_dense,
             prior: DVector::zeros(nx),
             post: DVector::zeros(nx),
             innov: DVector::zeros(ny),
-            a,
-            b,
-            c_tilde,
             gain,
             p,
             ny,
@@ -118,11 +157,18 @@ impl SteadyStateKalman {
         self.post.rows_mut(0, k).copy_from(&y.rows(0, k));
     }
 
-    /// Time update with the applied input u: ξ̂_{k+1|k} = A ξ̂_{k|k} + B u + c̃.
+    /// Time update with the applied input u: ξ̂_{k+1|k} = A ξ̂_{k|k} + B u + c̃ (copy rows
+    /// copied, dense rows multiplied; module docs).
     pub fn predict(&mut self, u: &DVector<f64>) {
-        self.prior.copy_from(&self.c_tilde);
-        self.prior.gemv(1.0, &self.a, &self.post, 1.0);
-        self.prior.gemv(1.0, &self.b, u, 1.0);
+        self.dense_values.copy_from(&self.c_dense);
+        self.dense_values.gemv(1.0, &self.a_dense, &self.post, 1.0);
+        self.dense_values.gemv(1.0, &self.b_dense, u, 1.0);
+        for &(r, src) in &self.copies {
+            self.prior[r] = self.post[src];
+        }
+        for (k, &r) in self.dense_rows.iter().enumerate() {
+            self.prior[r] = self.dense_values[k];
+        }
     }
 
     /// The current a-posteriori estimate ξ̂_{k|k}.

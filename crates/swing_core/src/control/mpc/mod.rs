@@ -16,6 +16,7 @@ pub mod active_set;
 pub mod condense;
 pub mod estimator;
 pub mod qp;
+pub mod tracking;
 
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
@@ -166,10 +167,21 @@ impl MpcSettings {
     }
 }
 
-enum Backend {
+pub(crate) enum Backend {
     None,
     Clarabel(Box<ClarabelQp>),
     ActiveSet(Box<ActiveSetQp>),
+}
+
+impl Backend {
+    /// New bound values of the same kinds (an acceleration bound that changes per leg).
+    pub(crate) fn set_bounds(&mut self, bounds: Bounds) {
+        match self {
+            Backend::None => {}
+            Backend::Clarabel(qp) => qp.set_bounds(bounds),
+            Backend::ActiveSet(qp) => qp.set_bounds(bounds),
+        }
+    }
 }
 
 /// The MPC controller (see module docs); implements [`SwingController`] at the model's dt.
@@ -211,7 +223,8 @@ impl std::fmt::Debug for MpcController {
     }
 }
 
-fn check_model(model: &LinearModel) -> Result<(usize, usize, usize), ControlError> {
+/// Check a model's dimensions and entries; returns (states n, delays q, inputs m).
+pub(crate) fn check_model(model: &LinearModel) -> Result<(usize, usize, usize), ControlError> {
     let bad = |s: String| Err(ControlError::Model(s));
     let n = model.states.len();
     let q = model.delays;
@@ -258,37 +271,169 @@ fn check_model(model: &LinearModel) -> Result<(usize, usize, usize), ControlErro
     Ok((n, q, m))
 }
 
+/// `settings` checked, with the Kalman measurement noise raised to what the model carries
+/// (a model selected on noisy data says how much noise its estimator must assume).
+pub(crate) fn settings_for(
+    model: &LinearModel,
+    settings: MpcSettings,
+) -> Result<MpcSettings, ControlError> {
+    settings.validate()?;
+    let mut settings = settings;
+    if let Some(r) = model.diagnostics.measurement_noise {
+        positive("measurement_noise", r)?;
+        settings.kf_measurement_noise = settings.kf_measurement_noise.max(r);
+    }
+    Ok(settings)
+}
+
+/// What each model state of the newest frame measures, then each axis' velocity index and
+/// swing index in that frame.
+type FrameSources = (Vec<Measured>, Vec<usize>, Vec<usize>);
+
+/// What each model state of the newest frame measures, and each axis' velocity and swing
+/// index in that frame.
+pub(crate) fn frame_sources(model: &LinearModel) -> Result<FrameSources, ControlError> {
+    let layout = AxisLayout::from_model(model)?;
+    let sources = model
+        .states
+        .iter()
+        .map(|name| {
+            layout.classify(name).ok_or_else(|| {
+                ControlError::Model(format!(
+                    "model state '{name}' is not one the controller measures on axes {:?} \
+                     (expected v<axis>, swing_<axis> or swing_rate_<axis>)",
+                    layout.suffixes()
+                ))
+            })
+        })
+        .collect::<Result<Vec<Measured>, _>>()?;
+    let iv = layout.axes().iter().map(|a| a.v).collect();
+    let is = layout.axes().iter().map(|a| a.swing).collect();
+    Ok((sources, iv, is))
+}
+
+/// Build the QP backend for the bounds (none when there is no bound).
+pub(crate) fn qp_backend(
+    h: &DMatrix<f64>,
+    bounds: Bounds,
+    solver: QpSolverKind,
+    m: usize,
+    nc: usize,
+) -> Result<Backend, ControlError> {
+    Ok(if !bounds.any() {
+        Backend::None
+    } else {
+        match solver {
+            QpSolverKind::Clarabel => {
+                Backend::Clarabel(Box::new(ClarabelQp::new(h, bounds, m, nc)?))
+            }
+            QpSolverKind::ActiveSet => {
+                Backend::ActiveSet(Box::new(ActiveSetQp::new(h, bounds, m, nc)?))
+            }
+        }
+    })
+}
+
+/// Diagonal of the Kalman process noise of ξ = [z; s⁻; d] (module docs of
+/// [`estimator`]): only the newest frame is a new measurement each tick; the older frames
+/// of the stack are the same measurements shifted down, so they carry neither process
+/// noise (the shift is exact) nor fresh measurement noise. Filtering them as independent
+/// measurements would let the noise of every frame through the gain K_ξ, which weighs
+/// differences of frames (rates) heavily.
+pub(crate) fn process_noise(
+    settings: &MpcSettings,
+    n: usize,
+    nm: usize,
+    nd: usize,
+    sources: &[Measured],
+) -> Vec<f64> {
+    (0..nm + nd)
+        .map(|i| {
+            if i < n {
+                settings.kf_process_noise.powi(2)
+            } else if i < nm {
+                0.0
+            } else {
+                let swing = settings.disturbance == DisturbanceModel::State
+                    && !matches!(sources[i - nm], Measured::V(_));
+                let scale = if swing {
+                    settings.kf_swing_disturbance_scale
+                } else {
+                    1.0
+                };
+                (settings.kf_disturbance_noise * scale).powi(2)
+            }
+        })
+        .collect()
+}
+
+/// Write the newest measured frame into the delay stack `ys` of n states × nz entries
+/// (shifting older frames down; `lag_copies` keep the older swings the stack does not hold).
+pub(crate) fn push_frame(
+    ys: &mut [f64],
+    n: usize,
+    nz: usize,
+    lag_copies: &[(usize, usize)],
+    sources: &[Measured],
+    state: &[AxisState],
+) {
+    // Older swings the stack does not hold (q < 3), for the swing-rate difference; the
+    // copies run from the last (oldest) backwards so each reads the previous tick's value.
+    for &(dst, src) in lag_copies.iter().rev() {
+        ys[dst] = ys[src];
+    }
+    ys.copy_within(0..nz - n, n);
+    for (k, src) in sources.iter().enumerate() {
+        ys[k] = match *src {
+            Measured::V(a) => state[a].v,
+            Measured::Swing(a) => state[a].swing,
+            Measured::SwingRate(a) => state[a].swing_rate,
+        };
+    }
+}
+
+/// The decision of one tick: the unconstrained minimiser `u_unc` when it meets the bounds,
+/// else the bounded QP's (f = −H U*, as U* minimises ½UᵀHU + fᵀU); written to `u_sol`.
+pub(crate) fn solve_bounded(
+    backend: &mut Backend,
+    bounds: &Bounds,
+    h: &DMatrix<f64>,
+    u_unc: &DVector<f64>,
+    u_prev: &DVector<f64>,
+    f: &mut DVector<f64>,
+    u_sol: &mut DVector<f64>,
+) -> Result<TickInfo, ControlError> {
+    let mut info = TickInfo::default();
+    let needs_qp = bounds.any() && bounds.violated(u_unc.as_slice(), u_prev.as_slice(), 1e-9);
+    if !needs_qp {
+        u_sol.copy_from(u_unc);
+        return Ok(info);
+    }
+    f.gemv(-1.0, h, u_unc, 0.0);
+    let iters = match backend {
+        Backend::None => 0,
+        Backend::Clarabel(qp) => qp.solve(f.as_slice(), u_prev.as_slice(), u_sol.as_mut_slice())?,
+        Backend::ActiveSet(qp) => qp.solve(
+            f.as_slice(),
+            u_unc.as_slice(),
+            u_prev.as_slice(),
+            u_sol.as_mut_slice(),
+        )?,
+    };
+    info.kind = TickKind::Constrained;
+    info.iterations = iters;
+    Ok(info)
+}
+
 impl MpcController {
     /// Build the controller: augment the model, design the Kalman filter, condense the QP
     /// and set up the solver. All allocation happens here.
     pub fn new(model: &LinearModel, settings: MpcSettings) -> Result<Self, ControlError> {
-        settings.validate()?;
-        let mut settings = settings;
-        // A model selected on noisy data says how much noise its estimator must assume.
-        if let Some(r) = model.diagnostics.measurement_noise {
-            positive("measurement_noise", r)?;
-            settings.kf_measurement_noise = settings.kf_measurement_noise.max(r);
-        }
+        let settings = settings_for(model, settings)?;
         let (n, q, m) = check_model(model)?;
         let nz = n * q;
         let dt = model.dt;
-        // Map model states onto the measured axis states.
-        let layout = AxisLayout::from_model(model)?;
-        let sources = model
-            .states
-            .iter()
-            .map(|name| {
-                layout.classify(name).ok_or_else(|| {
-                    ControlError::Model(format!(
-                        "model state '{name}' is not one the controller measures on axes {:?} \
-                         (expected v<axis>, swing_<axis> or swing_rate_<axis>)",
-                        layout.suffixes()
-                    ))
-                })
-            })
-            .collect::<Result<Vec<Measured>, _>>()?;
-        let iv: Vec<usize> = layout.axes().iter().map(|a| a.v).collect();
-        let is: Vec<usize> = layout.axes().iter().map(|a| a.swing).collect();
+        let (sources, iv, is) = frame_sources(model)?;
         let aug = Augmented::new(
             &model.a,
             &model.b,
@@ -323,23 +468,9 @@ impl MpcController {
         // (the shift is exact) nor fresh measurement noise. Filtering them as independent
         // measurements would let the noise of every frame through the gain K_ξ, which
         // weighs differences of frames (rates) heavily.
-        let mut w = DMatrix::<f64>::zeros(nx, nx);
-        for i in 0..nx {
-            w[(i, i)] = if i < n {
-                settings.kf_process_noise.powi(2)
-            } else if i < nm {
-                0.0
-            } else {
-                let swing = settings.disturbance == DisturbanceModel::State
-                    && !matches!(sources[i - nm], Measured::V(_));
-                let scale = if swing {
-                    settings.kf_swing_disturbance_scale
-                } else {
-                    1.0
-                };
-                (settings.kf_disturbance_noise * scale).powi(2)
-            };
-        }
+        let w = DMatrix::from_diagonal(&DVector::from_vec(process_noise(
+            &settings, n, nm, aug.nd, &sources,
+        )));
         let v = DMatrix::<f64>::identity(n, n) * settings.kf_measurement_noise.powi(2);
         let kf = SteadyStateKalman::new(aug.a.clone(), aug.b.clone(), aug.c.clone(), n, &w, &v)?;
         let bounds = Bounds {
@@ -347,18 +478,7 @@ impl MpcController {
             du_max: settings.jerk_max.map(|j| j * dt),
         };
         let nc = settings.control_horizon;
-        let backend = if !bounds.any() {
-            Backend::None
-        } else {
-            match settings.solver {
-                QpSolverKind::Clarabel => {
-                    Backend::Clarabel(Box::new(ClarabelQp::new(&cond.h, bounds, m, nc)?))
-                }
-                QpSolverKind::ActiveSet => {
-                    Backend::ActiveSet(Box::new(ActiveSetQp::new(&cond.h, bounds, m, nc)?))
-                }
-            }
-        };
+        let backend = qp_backend(&cond.h, bounds, settings.solver, m, nc)?;
         let nu = m * nc;
         let ny = 3 * m * settings.horizon;
         Ok(Self {
@@ -484,28 +604,21 @@ impl MpcController {
     }
 
     /// Which measured quantity each model state of the newest frame is, and each axis'
-    /// swing index in that frame (for the closed-loop linear maps of [`crate::control::check`]).
+    /// swing index in that frame (for the closed-loop linear maps of [`crate::design::check`]).
     pub(crate) fn frame_layout(&self) -> (&[Measured], &[usize], usize) {
         (&self.sources, &self.is, self.n)
     }
 
     /// Write the newest measured frame into the delay stack (shifting older frames down).
     fn push_frame(&mut self, state: &[AxisState]) {
-        let (n, nz) = (self.n, self.nz);
-        let ys = self.y.as_mut_slice();
-        // Older swings the stack does not hold (q < 3), for the swing-rate difference; the
-        // copies run from the last (oldest) backwards so each reads the previous tick's value.
-        for &(dst, src) in self.aug.lag_copies.iter().rev() {
-            ys[dst] = ys[src];
-        }
-        ys.copy_within(0..nz - n, n);
-        for (k, src) in self.sources.iter().enumerate() {
-            ys[k] = match *src {
-                Measured::V(a) => state[a].v,
-                Measured::Swing(a) => state[a].swing,
-                Measured::SwingRate(a) => state[a].swing_rate,
-            };
-        }
+        push_frame(
+            self.y.as_mut_slice(),
+            self.n,
+            self.nz,
+            &self.aug.lag_copies,
+            &self.sources,
+            state,
+        );
     }
 }
 
@@ -577,33 +690,15 @@ impl SwingController for MpcController {
         self.u_unc.gemv(1.0, &c.k_xi, &self.xi_last, 1.0);
         self.u_unc.gemv(1.0, &c.k_r, &self.r, 1.0);
         self.u_unc.gemv(1.0, &c.k_u, &self.u_prev, 1.0);
-        let mut info = TickInfo::default();
-        let needs_qp = self.bounds.any()
-            && self
-                .bounds
-                .violated(self.u_unc.as_slice(), self.u_prev.as_slice(), 1e-9);
-        if needs_qp {
-            // f = −H U* (U* minimises ½UᵀHU + fᵀU).
-            self.f.gemv(-1.0, &c.h, &self.u_unc, 0.0);
-            let iters = match &mut self.backend {
-                Backend::None => 0,
-                Backend::Clarabel(qp) => qp.solve(
-                    self.f.as_slice(),
-                    self.u_prev.as_slice(),
-                    self.u_sol.as_mut_slice(),
-                )?,
-                Backend::ActiveSet(qp) => qp.solve(
-                    self.f.as_slice(),
-                    self.u_unc.as_slice(),
-                    self.u_prev.as_slice(),
-                    self.u_sol.as_mut_slice(),
-                )?,
-            };
-            info.kind = TickKind::Constrained;
-            info.iterations = iters;
-        } else {
-            self.u_sol.copy_from(&self.u_unc);
-        }
+        let info = solve_bounded(
+            &mut self.backend,
+            &self.bounds,
+            &c.h,
+            &self.u_unc,
+            &self.u_prev,
+            &mut self.f,
+            &mut self.u_sol,
+        )?;
         for (a, out) in acc_out.iter_mut().enumerate() {
             let u = self.u_sol[a];
             if !u.is_finite() {

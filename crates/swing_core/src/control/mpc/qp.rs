@@ -175,6 +175,16 @@ impl ClarabelQp {
         })
     }
 
+    /// Change the bound values (of the kinds the solver was built with: a bound that was
+    /// absent stays absent); they apply from the next solve.
+    pub fn set_bounds(&mut self, bounds: Bounds) {
+        if bounds.u_max.is_some() == self.bounds.u_max.is_some()
+            && bounds.du_max.is_some() == self.bounds.du_max.is_some()
+        {
+            self.bounds = bounds;
+        }
+    }
+
     /// Solve for gradient `f` and previous input `u_prev`; the minimiser goes to `out`.
     /// Returns the iteration count.
     pub fn solve(
