@@ -82,3 +82,56 @@ def test_both_guidances_fly_every_waypoint_and_hold_on_the_last(mode):
     # PX4's mission legs start and stop hard (28° of swing on this rig); swingrt's
     # jerk-limited legs leave about half.
     assert peak < (20.0 if mode == "smooth" else 40.0)
+
+
+def test_swingrt_mission_prints_one_row_per_waypoint(tmp_path, capsys):
+    from swingrt.cli import main
+
+    plan = tmp_path / "square.toml"
+    plan.write_text(SQUARE)
+    out = tmp_path / "report.json"
+    scenario = tmp_path / "payload.toml"
+    scenario.write_text("[payload]\nmass = 0.3\nlength = 1.5\n")
+    args = ["mission", str(plan), "--guidance", "smooth", "--scenario", str(scenario)]
+    assert main([*args, "-o", str(out)]) == 0
+    report = json.loads(out.read_text())["smooth"]
+    rows = report["waypoints"]
+    assert [r["item"] for r in rows] == [0, 1, 2]
+    assert "smooth: mission finished" in capsys.readouterr().out
+    for r in rows[1:]:
+        # Arrivals in order, inside the acceptance radius for the whole hold, the leg's
+        # swing bounds the swing left once there, settling (if any) happens within the hold.
+        assert r["hold_error_m"] < 0.5 + 0.3
+        assert r["residual_swing_deg"] <= r["leg_swing_max_deg"] + 1e-9
+        assert 0.0 < r["leg_swing_max_deg"] < 20.0
+        assert math.isnan(r["settle_1deg_s"]) or 0.0 <= r["settle_1deg_s"] <= 2.0
+    assert rows[1]["arrival_s"] < rows[2]["arrival_s"] <= report["total_s"]
+    bad = tmp_path / "square.txt"
+    bad.write_text(SQUARE)
+    assert main(["mission", str(bad)]) == 2
+    assert "must end in .plan or .toml" in capsys.readouterr().err
+
+
+def test_swingrt_mission_flies_the_position_mpc_on_a_model(tmp_path, capsys):
+    from swingrt import mission as ms
+    from swingrt.cli import main
+    from swingrt.sysid import identify
+
+    # The model is the white-box pendulum identified from a PX4-guided flight of the plan
+    # (its cable length is estimated from the swing, not copied from the plant).
+    m = _core.Mission.from_text(SQUARE, "toml")
+    scenario = {"payload": {"mass": 0.3, "length": 1.5}}
+    trace, _ = ms.fly(m, "px4", scenario)
+    model = identify(trace, axes="ne", method="whitebox", payload_mass=0.3, test_span=8.0)
+    model.save(str(tmp_path / "model.json"))
+    (tmp_path / "square.toml").write_text(SQUARE)
+    (tmp_path / "payload.toml").write_text("[payload]\nmass = 0.3\nlength = 1.5\n")
+    args = ["mission", str(tmp_path / "square.toml"), "--guidance", "px4"]
+    args += ["--scenario", str(tmp_path / "payload.toml"), "--model", str(tmp_path / "model.json")]
+    assert main([*args, "-o", str(tmp_path / "r.json")]) == 0
+    capsys.readouterr()
+    report = json.loads((tmp_path / "r.json").read_text())
+    px4, mpc = report["px4"]["waypoints"], report["mpc"]["waypoints"]
+    assert [r["item"] for r in mpc] == [0, 1, 2]
+    for a, b in zip(px4[1:], mpc[1:], strict=True):
+        assert b["leg_swing_max_deg"] < a["leg_swing_max_deg"]

@@ -26,6 +26,7 @@ COMMANDS = (
     "sitl",
     "hil",
     "fly",
+    "mission",
     "bench",
 )
 

@@ -17,6 +17,7 @@ pub mod error;
 pub mod linalg;
 pub mod mission;
 pub mod plant;
+pub mod sensors;
 pub mod sim;
 pub mod sysid;
 pub mod testing;

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from swingrt._core import GRAVITY
 from swingrt.errors import FlightAbort, LinkError
 from swingrt.io.flight import Trace
 from swingrt.mavlink.link import (
@@ -168,7 +169,7 @@ class HilServer:
                 t, q, g[0], g[1], g[2], gps["lat"], gps["lon"], gps["alt"],
                 *(int(np.clip(round(x * 100), -32767, 32767)) for x in vel),
                 0, 0,
-                *(int(np.clip(round(x / 9.80665 * 1000), -32767, 32767)) for x in acc),
+                *(int(np.clip(round(x / GRAVITY * 1000), -32767, 32767)) for x in acc),
             )  # fmt: skip
         if k % self.swing_every == 0:
             sn, se = f["swing"]

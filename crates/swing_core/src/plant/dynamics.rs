@@ -388,7 +388,20 @@ impl Model {
     /// One classical RK4 step of length `h` with inputs held, followed by the projection.
     pub fn rk4(&self, s: &PlantState, u: &StepInput, h: f64, fx: Effects) -> PlantState {
         let k1 = self.derivative(s, u, fx);
-        let k2 = self.derivative(&s.add_scaled(&k1, 0.5 * h), u, fx);
+        self.rk4_from(s, &k1, u, h, fx)
+    }
+
+    /// [`Self::rk4`] with the first stage `k1` = `derivative(s, u, fx)` already evaluated
+    /// (the simulator reads the vehicle's acceleration from it for the IMU).
+    pub fn rk4_from(
+        &self,
+        s: &PlantState,
+        k1: &PlantState,
+        u: &StepInput,
+        h: f64,
+        fx: Effects,
+    ) -> PlantState {
+        let k2 = self.derivative(&s.add_scaled(k1, 0.5 * h), u, fx);
         let k3 = self.derivative(&s.add_scaled(&k2, 0.5 * h), u, fx);
         let k4 = self.derivative(&s.add_scaled(&k3, h), u, fx);
         let mut next = PlantState {

@@ -28,6 +28,8 @@ use crate::plant::dynamics::swing_angles;
 use crate::plant::{
     Effects, Model, PayloadKind, PayloadParams, PlantState, StepInput, Wind, GRAVITY,
 };
+use crate::sensors::cable::{body_angles, compose, polynomial};
+use crate::sensors::{Imu, ImuSample, SwingSource};
 
 /// Mean Earth radius used for the local flat-Earth GPS projection [m].
 const EARTH_RADIUS: f64 = 6_371_000.0;
@@ -181,8 +183,12 @@ pub struct SensorFrame {
     pub fields_updated: u32,
     /// A GPS fix when one is due this step.
     pub gps: Option<GpsFix>,
-    /// The swing sensor: measured projected angles (N, E) [rad].
+    /// The swing sensor: measured projected angles (N, E) [rad]; NaN when the scenario's
+    /// swing source is the IMU (no sensor on the cable).
     pub swing: [f64; 2],
+    /// The body cable sensor's ADC readings (x, y) [counts]; NaN unless the swing source is
+    /// `body`.
+    pub adc: [f64; 2],
     /// Ground truth: attitude quaternion (w, x, y, z), body FRD → NED.
     pub attitude: [f64; 4],
     /// Ground truth: position NED [m].
@@ -209,6 +215,10 @@ pub struct HilPlant {
     acc_ned: Vector3<f64>,
     motors: [f64; 4],
     swing_noise: [f64; 2],
+    imu: Imu,
+    /// Sums of the IMU's errors over the substeps of the current lockstep step, and count.
+    imu_errors: ([f64; 6], u32),
+    last_imu: ImuSample,
     noise_every: u64,
     gps_every: u64,
     mag_baro_every: u64,
@@ -247,6 +257,8 @@ impl HilPlant {
         let lockstep = settings.substeps as u64;
         // Slower streams run on whole lockstep steps so each frame carries all it updates.
         let per_step = |hz: f64| (div(hz) / lockstep).max(1) * lockstep;
+        let total = sc.vehicle.mass + sc.payload.total_mass();
+        let imu = Imu::new(sc.sensors.imu.clone(), h, total * GRAVITY / 4.0, sc.seed);
         Ok(Self {
             airborne_model,
             ground_model,
@@ -260,6 +272,12 @@ impl HilPlant {
             acc_ned: Vector3::zeros(),
             motors: [0.0; 4],
             swing_noise: [0.0; 2],
+            imu,
+            imu_errors: ([0.0; 6], 0),
+            last_imu: ImuSample {
+                accel: [0.0, 0.0, -GRAVITY],
+                gyro: [0.0; 3],
+            },
             noise_every: div(sc.noise.swing_rate),
             gps_every: per_step(settings.gps_rate),
             mag_baro_every: per_step(settings.mag_baro_rate),
@@ -361,6 +379,13 @@ impl HilPlant {
         if !self.airborne_model.payload.events.is_empty() {
             self.payload_events();
         }
+        let e = self.imu.error_sample(self.state.thrust.into());
+        let (sum, n) = &mut self.imu_errors;
+        for k in 0..3 {
+            sum[k] += e.accel[k];
+            sum[k + 3] += e.gyro[k];
+        }
+        *n += 1;
         let mut next = self
             .model()
             .rk4(&self.state, &u, self.h, Effects::default());
@@ -451,13 +476,46 @@ impl HilPlant {
         swing_angles(&self.state.n[0], &self.state.ndot[0])
     }
 
-    /// The swing sensor's reading (N, E) [rad]: truth plus the scenario's sensor noise.
+    /// The swing sensor's reading (N, E) [rad]: the world-frame sensor (truth plus the
+    /// scenario's sensor noise) or the body sensor composed with the attitude; NaN with the
+    /// swing source `imu`.
     pub fn measured_swing(&self) -> [f64; 2] {
-        if self.airborne_model.links() == 0 {
-            return [0.0; 2];
+        match self.sc.sensors.swing {
+            SwingSource::Imu => [f64::NAN; 2],
+            _ if self.airborne_model.links() == 0 => [0.0; 2],
+            SwingSource::Sensor => {
+                let t = self.true_swing();
+                [t[0] + self.swing_noise[0], t[1] + self.swing_noise[1]]
+            }
+            SwingSource::Body => {
+                let b = &self.sc.sensors.body;
+                let adc = self.adc_counts();
+                let beta = [
+                    polynomial(&b.calibration(0), adc[0]),
+                    polynomial(&b.calibration(1), adc[1]),
+                ];
+                compose(&self.state.rotation(), beta)
+            }
         }
-        let t = self.true_swing();
-        [t[0] + self.swing_noise[0], t[1] + self.swing_noise[1]]
+    }
+
+    /// The body cable sensor's ADC readings (x, y) [counts]; NaN unless the swing source is
+    /// `body`. A payload lying on the ground reads as hanging straight down.
+    pub fn adc_counts(&self) -> [f64; 2] {
+        if self.sc.sensors.swing != SwingSource::Body {
+            return [f64::NAN; 2];
+        }
+        let n = if self.payload_lifted {
+            self.state.n[0]
+        } else {
+            Vector3::new(0.0, 0.0, 1.0)
+        };
+        let beta = body_angles(&self.state.rotation(), &n);
+        let b = &self.sc.sensors.body;
+        [
+            b.counts(0, beta[0] + self.swing_noise[0]),
+            b.counts(1, beta[1] + self.swing_noise[1]),
+        ]
     }
 
     fn gauss3(&mut self, std: f64) -> Vector3<f64> {
@@ -485,8 +543,18 @@ impl HilPlant {
         let r = s.rotation();
         let g = Vector3::new(0.0, 0.0, GRAVITY);
         let st = self.settings.clone();
-        let accel = r.transpose() * (self.acc_ned - g) + self.gauss3(st.accel_std);
-        let gyro = s.rate + self.gauss3(st.gyro_std);
+        // The IMU's errors averaged over the step, as PX4's delta-velocity integration of a
+        // fast-sampled sensor averages them.
+        let (sum, n) = std::mem::replace(&mut self.imu_errors, ([0.0; 6], 0));
+        let n = f64::from(n.max(1));
+        let err_a = Vector3::new(sum[0], sum[1], sum[2]) / n;
+        let err_g = Vector3::new(sum[3], sum[4], sum[5]) / n;
+        let accel = r.transpose() * (self.acc_ned - g) + err_a + self.gauss3(st.accel_std);
+        let gyro = s.rate + err_g + self.gauss3(st.gyro_std);
+        self.last_imu = ImuSample {
+            accel: accel.into(),
+            gyro: gyro.into(),
+        };
         let mag = r.transpose() * Vector3::from(st.mag_field) + self.gauss3(st.mag_std);
         let alt = st.home_alt - s.pos.z;
         let pressure = SEA_LEVEL_HPA * (1.0 - 2.255_77e-5 * alt).powf(5.255_88);
@@ -508,6 +576,7 @@ impl HilPlant {
             fields_updated: fields,
             gps,
             swing: self.measured_swing(),
+            adc: self.adc_counts(),
             attitude: [s.att.w, s.att.i, s.att.j, s.att.k],
             position: s.pos.into(),
             velocity: s.vel.into(),
@@ -558,6 +627,9 @@ impl HilPlant {
             truth,
             payload,
             wind: self.wind_now,
+            imu: self.last_imu,
+            adc: self.adc_counts(),
+            estimate: [f64::NAN; 2],
         }
         .row();
         let vals = row.values();
@@ -588,6 +660,7 @@ mod tests {
             "none" => PayloadKind::None,
             _ => PayloadKind::Single,
         };
+        sc.sensors.imu = crate::sensors::ImuParams::ideal();
         let settings = HilSettings {
             accel_std: 0.0,
             gyro_std: 0.0,

@@ -21,7 +21,9 @@ use crate::control::SwingController;
 use crate::error::{Categorized, Category};
 use crate::mission::{Guidance, MissionEvent};
 use crate::plant::dynamics::swing_angles;
-use crate::plant::{Effects, Model, PayloadKind, PlantState, StepInput, Wind};
+use crate::plant::{Effects, Model, PayloadKind, PlantState, StepInput, Wind, GRAVITY};
+use crate::sensors::cable::{body_angles, compose, polynomial};
+use crate::sensors::{Imu, ImuSample, ImuSwingEstimator, ImuSwingSettings, SwingSource};
 
 /// Errors of a simulation run.
 #[derive(Debug, Error)]
@@ -85,6 +87,12 @@ pub(crate) struct PlantSample<'a> {
     pub payload: Vector3<f64>,
     /// Wind, NED [m/s].
     pub wind: Vector3<f64>,
+    /// The IMU's reading (body FRD).
+    pub imu: ImuSample,
+    /// The body cable sensor's ADC readings (x, y) [counts]; NaN without one.
+    pub adc: [f64; 2],
+    /// The swing estimated from the IMU (N, E) [rad]; NaN without an estimate.
+    pub estimate: [f64; 2],
 }
 
 impl PlantSample<'_> {
@@ -124,6 +132,16 @@ impl PlantSample<'_> {
             payload_pd: self.payload.z,
             ctrl_active: 0.0,
             fallback: 0.0,
+            imu_ax: self.imu.accel[0],
+            imu_ay: self.imu.accel[1],
+            imu_az: self.imu.accel[2],
+            imu_gx: self.imu.gyro[0],
+            imu_gy: self.imu.gyro[1],
+            imu_gz: self.imu.gyro[2],
+            adc_x: self.adc[0],
+            adc_y: self.adc[1],
+            swing_est_n: self.estimate[0],
+            swing_est_e: self.estimate[1],
         }
     }
 }
@@ -163,6 +181,9 @@ pub struct Simulator {
     meas_pos: Vector3<f64>,
     meas_vel: Vector3<f64>,
     acc_bias: Vector3<f64>,
+    imu: Imu,
+    swing_est: Option<ImuSwingEstimator>,
+    tick_est: Ticker,
     supervisor: ControllerSupervisor,
     /// The mission's guidance, when one is flown, and its start time [s].
     guidance: Option<(Box<dyn Guidance>, f64)>,
@@ -214,6 +235,11 @@ impl Simulator {
         let schedule = sc.schedule();
         let wind = Wind::new(sc.wind.clone(), sc.seed);
         let acc_bias = Vector3::new(sc.noise.acc_sp_bias[0], sc.noise.acc_sp_bias[1], 0.0);
+        let mut imu = Imu::new(sc.sensors.imu.clone(), h, total * GRAVITY / 4.0, sc.seed);
+        imu.settle(ImuSample {
+            accel: [0.0, 0.0, -GRAVITY],
+            gyro: [0.0; 3],
+        });
         let mut sim = Self {
             model,
             fx: Effects::default(),
@@ -237,6 +263,9 @@ impl Simulator {
             meas_pos: start,
             meas_vel: Vector3::zeros(),
             acc_bias,
+            imu,
+            swing_est: None,
+            tick_est: Ticker::new(1),
             supervisor: ControllerSupervisor::default(),
             guidance: None,
             guidance_started: false,
@@ -245,6 +274,12 @@ impl Simulator {
             fc,
             sc,
         };
+        // The IMU's swing estimate is always logged next to the true swing; with the swing
+        // source `imu` the controller flies on it.
+        // Its rate is rounded to one the physics step divides (the scenario's physics_dt is free).
+        let mut est = sim.sc.sensors.estimator.clone();
+        est.rate = 1.0 / (h * (1.0 / (est.rate * h)).round().max(1.0));
+        sim.set_swing_estimator(est)?;
         sim.apply_schedule();
         Ok(sim)
     }
@@ -297,6 +332,38 @@ impl Simulator {
     /// adaptive MPC's detections and model swaps.
     pub fn controller_events(&self) -> Vec<(f64, &'static str, f64)> {
         self.supervisor.events()
+    }
+
+    /// Estimate the swing from the IMU with `settings` from now on (fed every
+    /// 1/`settings.rate` s, the tare starting now); with the scenario's swing source `imu` the
+    /// controller flies on this estimate, and the trace logs it as `swing_est_*`.
+    pub fn set_swing_estimator(&mut self, settings: ImuSwingSettings) -> Result<(), SimError> {
+        let steps = 1.0 / (settings.rate * self.h);
+        if !(steps >= 1.0 - 1e-9 && (steps - steps.round()).abs() < 1e-6) {
+            return Err(ConfigError::new(
+                "swing_estimator.rate",
+                format!(
+                    "must divide the physics rate {} Hz evenly (got {} Hz)",
+                    1.0 / self.h,
+                    settings.rate
+                ),
+            )
+            .into());
+        }
+        let est = ImuSwingEstimator::new(settings).map_err(|e| e.within("swing_estimator"))?;
+        self.tick_est = Ticker::at_step(steps.round() as u64, self.step);
+        self.swing_est = Some(est);
+        Ok(())
+    }
+
+    /// The IMU's latest filtered reading.
+    pub fn imu_sample(&self) -> ImuSample {
+        self.imu.filtered()
+    }
+
+    /// The latest swing estimate from the IMU (N, E) [rad], if an estimator is set.
+    pub fn swing_estimate(&self) -> Option<[f64; 2]> {
+        self.swing_est.as_ref().map(ImuSwingEstimator::estimate)
     }
 
     /// Switch idealised effects (drag, friction, rotors) for experiments.
@@ -363,13 +430,56 @@ impl Simulator {
         self.supervisor.fallback_reason()
     }
 
-    /// The latest measured (noisy) swing angles (N, E) [rad].
+    /// The latest swing reading (N, E) [rad] of the flight's swing sensor: the world-frame
+    /// sensor (truth plus noise) or the body sensor composed with the attitude; NaN when the
+    /// swing source is the IMU (no sensor on the cable, see [`Self::swing_estimate`]).
     pub fn measured_swing(&self) -> [f64; 2] {
-        let [sn, se, _, _] = swing_angles(&self.state.n[0], &self.state.ndot[0]);
-        if self.model.links() == 0 {
-            return [0.0, 0.0];
+        match self.sc.sensors.swing {
+            SwingSource::Imu => [f64::NAN; 2],
+            _ if self.model.links() == 0 => [0.0, 0.0],
+            SwingSource::Sensor => {
+                let [sn, se, _, _] = swing_angles(&self.state.n[0], &self.state.ndot[0]);
+                [sn + self.swing_noise[0], se + self.swing_noise[1]]
+            }
+            SwingSource::Body => {
+                let rot = self.state.rotation();
+                let adc = self.adc_counts();
+                let b = &self.sc.sensors.body;
+                let beta = [
+                    polynomial(&b.calibration(0), adc[0]),
+                    polynomial(&b.calibration(1), adc[1]),
+                ];
+                compose(&rot, beta)
+            }
         }
-        [sn + self.swing_noise[0], se + self.swing_noise[1]]
+    }
+
+    /// The body cable sensor's ADC readings (x, y) [counts] of the cable's body angles plus
+    /// the swing-sensor noise; NaN unless the swing source is `body`.
+    pub fn adc_counts(&self) -> [f64; 2] {
+        if self.sc.sensors.swing != SwingSource::Body {
+            return [f64::NAN; 2];
+        }
+        let n = if self.model.links() == 0 {
+            Vector3::new(0.0, 0.0, 1.0)
+        } else {
+            self.state.n[0]
+        };
+        let beta = body_angles(&self.state.rotation(), &n);
+        let b = &self.sc.sensors.body;
+        [
+            b.counts(0, beta[0] + self.swing_noise[0]),
+            b.counts(1, beta[1] + self.swing_noise[1]),
+        ]
+    }
+
+    /// What the controller reads as the swing: the sensor's reading, or with the swing
+    /// source `imu` the IMU estimate (NaN when no estimator is set).
+    fn controller_swing(&self) -> [f64; 2] {
+        match self.sc.sensors.swing {
+            SwingSource::Imu => self.swing_estimate().unwrap_or([f64::NAN; 2]),
+            _ => self.measured_swing(),
+        }
     }
 
     /// True swing angles and rates of the first link: (N, E, rate N, rate E).
@@ -477,7 +587,9 @@ impl Simulator {
             wind: self.wind_now,
             external_force: Vector3::zeros(),
         };
-        self.state = self.model.rk4(&self.state, &u, self.h, self.fx);
+        let k1 = self.model.derivative(&self.state, &u, self.fx);
+        self.sample_imu(&k1.vel);
+        self.state = self.model.rk4_from(&self.state, &k1, &u, self.h, self.fx);
         self.step += 1;
         Ok(())
     }
@@ -508,6 +620,20 @@ impl Simulator {
         }
     }
 
+    /// One IMU sample of the current state, whose acceleration is `acc` (NED); feeds the
+    /// swing estimator when it is due.
+    fn sample_imu(&mut self, acc: &Vector3<f64>) {
+        let rot = self.state.rotation();
+        let f = rot.transpose() * (acc - Vector3::new(0.0, 0.0, GRAVITY));
+        let s = self
+            .imu
+            .sample(f.into(), self.state.rate.into(), self.state.thrust.into());
+        let due = self.tick_est.due();
+        if let (true, Some(est)) = (due, self.swing_est.as_mut()) {
+            est.update(s.accel, &rot, self.meas_vel.into());
+        }
+    }
+
     fn measure_translation(&mut self) {
         self.meas_pos = self.state.pos;
         self.meas_vel = self.state.vel;
@@ -526,7 +652,7 @@ impl Simulator {
         let truth = self.true_swing();
         let inputs = TickInputs {
             t: self.time(),
-            swing: self.measured_swing(),
+            swing: self.controller_swing(),
             swing_rate: [truth[2], truth[3]],
             pos: &self.meas_pos,
             vel: &self.meas_vel,
@@ -572,6 +698,9 @@ impl Simulator {
             truth,
             payload,
             wind: self.wind_now,
+            imu: self.imu.filtered(),
+            adc: self.adc_counts(),
+            estimate: self.swing_estimate().unwrap_or([f64::NAN; 2]),
         };
         TraceRow {
             acc_sp_n: self.fc.acc_sp.x,

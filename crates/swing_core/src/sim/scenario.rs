@@ -11,6 +11,7 @@ use serde::{Deserialize, Serialize};
 use crate::config::{finite, in_range, non_negative, positive, ConfigError};
 use crate::control::px4::{AxisSetpoint, Px4Params};
 use crate::plant::{PayloadParams, VehicleParams, WindParams};
+use crate::sensors::SensorParams;
 
 /// Sensor noise and bias (seeded by the scenario seed).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -272,6 +273,8 @@ pub struct Scenario {
     pub wind: WindParams,
     /// Sensor noise and bias.
     pub noise: NoiseParams,
+    /// The swing source, the IMU and the body-fixed cable sensor.
+    pub sensors: SensorParams,
     /// PX4 cascade gains and limits.
     pub controller: Px4Params,
     /// Setpoint schedule (sorted by time when loaded).
@@ -293,6 +296,7 @@ impl Default for Scenario {
             payload: PayloadParams::default(),
             wind: WindParams::default(),
             noise: NoiseParams::default(),
+            sensors: SensorParams::default(),
             controller: Px4Params::default(),
             setpoints: Vec::new(),
             random_steps: None,
@@ -453,6 +457,7 @@ impl Scenario {
         }
         self.wind.validate().map_err(|e| e.within("wind"))?;
         self.noise.validate().map_err(|e| e.within("noise"))?;
+        self.sensors.validate().map_err(|e| e.within("sensors"))?;
         self.controller
             .validate()
             .map_err(|e| e.within("controller"))?;

@@ -67,6 +67,16 @@ schema!(
         payload_pd: "Payload position Down [m].",
         ctrl_active: "1 while the swing controller flies the controlled axes, else 0.",
         fallback: "1 once the swing controller has been handed back to PX4, else 0.",
+        imu_ax: "Accelerometer x: body FRD specific force as PX4's filtered `vehicle_acceleration` [m/s²].",
+        imu_ay: "Accelerometer y [m/s²].",
+        imu_az: "Accelerometer z [m/s²] (about −g at hover).",
+        imu_gx: "Gyro x: body FRD rate as PX4's filtered `vehicle_angular_velocity` [rad/s].",
+        imu_gy: "Gyro y [rad/s].",
+        imu_gz: "Gyro z [rad/s].",
+        adc_x: "Body cable sensor: ADC reading of the x potentiometer [counts] (NaN without one).",
+        adc_y: "Body cable sensor: ADC reading of the y potentiometer [counts] (NaN without one).",
+        swing_est_n: "Swing North estimated from the IMU, as the controller got it [rad] (NaN without an estimate).",
+        swing_est_e: "Swing East estimated from the IMU [rad] (NaN without an estimate).",
     ]
 );
 
@@ -116,6 +126,16 @@ pub const STATE_KEYS: &[&str] = &[
     "swing_true_n",
     "swing_true_e",
     "thrust",
+    "imu_ax",
+    "imu_ay",
+    "imu_az",
+    "imu_gx",
+    "imu_gy",
+    "imu_gz",
+    "adc_x",
+    "adc_y",
+    "swing_est_n",
+    "swing_est_e",
 ];
 
 /// Columns every flight log has, whatever its source (simulator, offboard node, PX4 ULog,

@@ -1,0 +1,351 @@
+//! Swing sources, and the swing angle estimated from the vehicle's own IMU.
+//!
+//! A flight measures the payload's swing one way ([`SwingSource`]): a world-frame swing
+//! sensor (`sensor`), a cable-angle sensor fixed to the airframe composed with the attitude
+//! (`body`, [`super::cable`]), or nothing on the cable at all (`imu`).
+//!
+//! **The swing in the IMU.** The rotors push along body z only, so the accelerometer's body
+//! x/y specific force is the external force on the vehicle other than thrust, over its mass:
+//! the cable's pull T n (T the tension, n the cable's unit vector, vehicle → payload) plus
+//! the airframe's drag D. In body axes, f_xy = (T n_b,xy + D_xy) / m_Q. With the payload
+//! hanging, the pull along body z is T n_bz ≈ m_p (g − a_z) ≈ m_p g, so
+//!
+//!   n_bx / n_bz = (f_x − D_x/m_Q) / k,   k = T n_bz / m_Q ≈ g m_p / m_Q,
+//!
+//! the tangent of the cable's angle relative to the body, measured with a scale k that only
+//! the payload-to-vehicle mass ratio sets. The estimate rotates that body direction by the
+//! attitude into the world frame exactly as the body sensor does ([`super::cable::compose`]):
+//! r_b = ((f_x − o_x + d_x)/k̂, (f_y − o_y + d_y)/k̂, 1), θ̂ = (atan2(r_N, r_D),
+//! atan2(r_E, r_D)), then a second-order Butterworth low-pass at `cutoff` removes what is left
+//! of rotor vibration and noise. o is the accelerometer's offset at hover (bias; `tare`
+//! measures it at the start of each flight, with the payload hanging still), d the modelled
+//! drag specific force removed, d_i = c_lin,i v_b,i + c_quad,i v_b,i |v_b,i| with v_b the
+//! body-frame velocity (still air assumed: wind shows up as swing), the same drag model
+//! PX4's EKF2 uses to estimate wind from these two channels (`EKF2_BCOEF_*`, `EKF2_MCOEF`).
+//!
+//! To first order the estimate is θ̂ ≈ (k/k̂)(θ − tilt) + tilt: a wrong scale both scales the
+//! swing and leaks (1 − k/k̂) of the vehicle's tilt into it, which is why the scale is
+//! calibrated (from the flight's own dynamics or the thrust, `sysid::imu_swing`). The
+//! dynamic tension (centripetal m_p l θ̇², the vehicle's vertical acceleration) changes k by a
+//! few per cent at most in the swings that matter here.
+
+use nalgebra::Matrix3;
+use serde::{Deserialize, Serialize};
+
+use super::cable::compose_tangents;
+use super::filter::LowPass2;
+use crate::config::{in_range, non_negative, positive, ConfigError};
+use crate::plant::GRAVITY;
+
+/// Where a flight's swing measurement comes from (module docs).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SwingSource {
+    /// A swing sensor reading the world-frame angles.
+    #[default]
+    Sensor,
+    /// A cable-angle sensor on the airframe, composed with the attitude.
+    Body,
+    /// No sensor on the cable: the swing estimated from the IMU.
+    Imu,
+}
+
+impl SwingSource {
+    /// The source's name in files and messages.
+    pub fn name(self) -> &'static str {
+        match self {
+            SwingSource::Sensor => "sensor",
+            SwingSource::Body => "body",
+            SwingSource::Imu => "imu",
+        }
+    }
+}
+
+/// How the IMU's specific force becomes a world-frame swing angle (module docs).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ImuSwingSettings {
+    /// Pull scale k̂: body-horizontal specific force per unit tangent of the cable's
+    /// body-relative angle, ≈ g·m_p/m_Q [m/s²].
+    pub scale: f64,
+    /// Cutoff of the estimate's low-pass [Hz].
+    pub cutoff: f64,
+    /// Rate the estimator is fed at [Hz] (sets the low-pass coefficients).
+    pub rate: f64,
+    /// Accelerometer offset at hover, body x then y [m/s²], used until a tare replaces it.
+    pub offset: [f64; 2],
+    /// Seconds at the start of a flight over which the offset is measured (the payload
+    /// hanging still) [s]; 0 keeps `offset`.
+    pub tare: f64,
+    /// Linear drag per vehicle mass removed, body x then y [1/s].
+    pub drag_linear: [f64; 2],
+    /// Quadratic drag per vehicle mass removed, body x then y [1/m].
+    pub drag_quadratic: [f64; 2],
+}
+
+impl Default for ImuSwingSettings {
+    fn default() -> Self {
+        Self {
+            // A payload of a fifth of the vehicle's mass, until a calibration says better.
+            scale: 0.2 * GRAVITY,
+            cutoff: 5.0,
+            rate: 100.0,
+            offset: [0.0; 2],
+            tare: 1.0,
+            drag_linear: [0.0; 2],
+            drag_quadratic: [0.0; 2],
+        }
+    }
+}
+
+impl ImuSwingSettings {
+    /// Check the settings; the error names the offending field.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        in_range("scale", self.scale, 1e-3, 100.0)?;
+        positive("rate", self.rate)?;
+        non_negative("cutoff", self.cutoff)?;
+        if self.cutoff > 0.0 && self.cutoff >= 0.5 * self.rate {
+            return Err(ConfigError::new(
+                "cutoff",
+                format!(
+                    "must be below half the rate {} Hz (got {} Hz)",
+                    self.rate, self.cutoff
+                ),
+            ));
+        }
+        in_range("tare", self.tare, 0.0, 60.0)?;
+        for i in 0..2 {
+            in_range(&format!("offset[{i}]"), self.offset[i], -50.0, 50.0)?;
+            in_range(
+                &format!("drag_linear[{i}]"),
+                self.drag_linear[i],
+                -10.0,
+                10.0,
+            )?;
+            in_range(
+                &format!("drag_quadratic[{i}]"),
+                self.drag_quadratic[i],
+                -10.0,
+                10.0,
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// The swing estimated from the IMU, one sample at a time (module docs). No allocation after
+/// construction.
+#[derive(Clone, Debug)]
+pub struct ImuSwingEstimator {
+    s: ImuSwingSettings,
+    lp: [LowPass2; 2],
+    offset: [f64; 2],
+    started: bool,
+    samples: u64,
+    tare_samples: u64,
+    tare_sum: [f64; 2],
+    out: [f64; 2],
+}
+
+impl ImuSwingEstimator {
+    /// A fresh estimator (validates the settings).
+    pub fn new(settings: ImuSwingSettings) -> Result<Self, ConfigError> {
+        settings.validate()?;
+        let lp = [LowPass2::new(settings.rate, settings.cutoff); 2];
+        let tare_samples = (settings.tare * settings.rate).round() as u64;
+        Ok(Self {
+            offset: settings.offset,
+            s: settings,
+            lp,
+            started: false,
+            samples: 0,
+            tare_samples,
+            tare_sum: [0.0; 2],
+            out: [0.0; 2],
+        })
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &ImuSwingSettings {
+        &self.s
+    }
+
+    /// The offset in use (the tared one once the tare is over) [m/s²].
+    pub fn offset(&self) -> [f64; 2] {
+        self.offset
+    }
+
+    /// Start over (a new flight): filters, tare and offset.
+    pub fn reset(&mut self) {
+        *self = Self {
+            s: self.s.clone(),
+            lp: [LowPass2::new(self.s.rate, self.s.cutoff); 2],
+            offset: self.s.offset,
+            started: false,
+            samples: 0,
+            tare_samples: self.tare_samples,
+            tare_sum: [0.0; 2],
+            out: [0.0; 2],
+        };
+    }
+
+    /// The body-horizontal pull per vehicle mass of one sample: specific force minus offset,
+    /// plus the modelled drag removed [m/s²].
+    #[inline]
+    fn pull(&self, accel: &[f64; 3], rot: &Matrix3<f64>, vel: &[f64; 3]) -> [f64; 2] {
+        let vb = rot.transpose() * nalgebra::Vector3::from(*vel);
+        let mut p = [0.0; 2];
+        for i in 0..2 {
+            let v = vb[i];
+            p[i] = accel[i] + self.s.drag_linear[i] * v + self.s.drag_quadratic[i] * v * v.abs();
+        }
+        p
+    }
+
+    /// The unfiltered world-frame angle of one sample [rad] (see the module docs).
+    #[inline]
+    pub fn angle(&self, accel: &[f64; 3], rot: &Matrix3<f64>, vel: &[f64; 3]) -> [f64; 2] {
+        let p = self.pull(accel, rot, vel);
+        let k = self.s.scale;
+        compose_tangents(
+            rot,
+            [(p[0] - self.offset[0]) / k, (p[1] - self.offset[1]) / k],
+        )
+    }
+
+    /// Feed one IMU sample: body specific force [m/s²], attitude (body → NED) and NED
+    /// velocity [m/s]; returns the filtered estimate (swing_n, swing_e) [rad].
+    #[inline]
+    pub fn update(&mut self, accel: [f64; 3], rot: &Matrix3<f64>, vel: [f64; 3]) -> [f64; 2] {
+        if self.samples < self.tare_samples {
+            let p = self.pull(&accel, rot, &vel);
+            self.tare_sum[0] += p[0];
+            self.tare_sum[1] += p[1];
+            self.samples += 1;
+            if self.samples == self.tare_samples {
+                let n = self.tare_samples as f64;
+                self.offset = [self.tare_sum[0] / n, self.tare_sum[1] / n];
+                // The filters restart on the tared angle, so the switch makes no jump.
+                self.started = false;
+            }
+        }
+        let a = self.angle(&accel, rot, &vel);
+        if !self.started {
+            self.lp[0].reset(a[0]);
+            self.lp[1].reset(a[1]);
+            self.started = true;
+        }
+        self.out = [self.lp[0].apply(a[0]), self.lp[1].apply(a[1])];
+        self.out
+    }
+
+    /// The latest estimate (swing_n, swing_e) [rad] (zeros before the first sample).
+    pub fn estimate(&self) -> [f64; 2] {
+        self.out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plant::dynamics::rotation;
+    use nalgebra::{UnitQuaternion, Vector3};
+
+    fn rot(roll: f64, pitch: f64, yaw: f64) -> Matrix3<f64> {
+        let q = UnitQuaternion::from_euler_angles(roll, pitch, yaw);
+        rotation(q.quaternion())
+    }
+
+    /// The specific force a static payload pull of tension `t` along world direction `n`
+    /// gives a vehicle of mass `m` (thrust adds only along body z, so it is left out of x/y).
+    fn pull_force(r: &Matrix3<f64>, n: Vector3<f64>, t: f64, m: f64) -> [f64; 3] {
+        let f = r.transpose() * n * (t / m);
+        [f.x, f.y, f.z - 9.8]
+    }
+
+    #[test]
+    fn the_exact_pull_scale_returns_the_true_angle_at_any_attitude() {
+        let (mp, mq) = (0.2, 0.95);
+        for (roll, pitch, yaw) in [(0.0, 0.0, 0.0), (0.1, -0.3, 0.7), (-0.2, 0.25, -2.0)] {
+            let r = rot(roll, pitch, yaw);
+            for (sn, se) in [(0.15, 0.0), (-0.3, 0.2)] {
+                let n = crate::plant::dynamics::unit_from_swing(sn, se);
+                // Pull along body z is exactly k·m_Q with k the scale: tension = k m_Q / n_bz.
+                let k = GRAVITY * mp / mq;
+                let nbz = (r.transpose() * n).z;
+                let accel = pull_force(&r, n, k * mq / nbz, mq);
+                let est = ImuSwingEstimator::new(ImuSwingSettings {
+                    scale: k,
+                    tare: 0.0,
+                    ..Default::default()
+                })
+                .unwrap();
+                let a = est.angle(&accel, &r, &[0.0; 3]);
+                assert!((a[0] - sn).abs() < 1e-12, "{a:?} vs {sn} {se}");
+                assert!((a[1] - se).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn a_wrong_scale_scales_the_swing_and_leaks_the_tilt() {
+        // Level vehicle: only the scale; pitched vehicle, no swing: (1 − k/k̂) of the tilt.
+        let k = 2.0;
+        let est = ImuSwingEstimator::new(ImuSwingSettings {
+            scale: 2.0 * k,
+            tare: 0.0,
+            ..Default::default()
+        })
+        .unwrap();
+        let r0 = rot(0.0, 0.0, 0.0);
+        let n = crate::plant::dynamics::unit_from_swing(0.02, 0.0);
+        let a = est.angle(&pull_force(&r0, n, k * 0.95 / n.z, 0.95), &r0, &[0.0; 3]);
+        assert!((a[0] - 0.01).abs() < 1e-5, "{a:?}");
+        let r = rot(0.0, -0.04, 0.0);
+        let down = Vector3::new(0.0, 0.0, 1.0);
+        let nbz = (r.transpose() * down).z;
+        let a = est.angle(&pull_force(&r, down, k * 0.95 / nbz, 0.95), &r, &[0.0; 3]);
+        assert!((a[0] - 0.5 * -0.04).abs() < 1e-4, "{a:?}");
+    }
+
+    #[test]
+    fn the_tare_removes_the_bias_and_drag_is_removed_by_its_model() {
+        let mut est = ImuSwingEstimator::new(ImuSwingSettings {
+            scale: 2.0,
+            tare: 0.5,
+            rate: 100.0,
+            drag_quadratic: [0.06, 0.06],
+            ..Default::default()
+        })
+        .unwrap();
+        let r = rot(0.0, 0.0, 0.0);
+        for _ in 0..50 {
+            est.update([0.3, -0.1, -9.8], &r, [0.0; 3]);
+        }
+        let o = est.offset();
+        assert!(
+            (o[0] - 0.3).abs() < 1e-12 && (o[1] + 0.1).abs() < 1e-12,
+            "{o:?}"
+        );
+        // Cruising North at 2 m/s in still air: drag −0.06·4 on x, which the model removes.
+        let mut last = [1.0; 2];
+        for _ in 0..300 {
+            last = est.update([0.3 - 0.24, -0.1, -9.8], &r, [2.0, 0.0, 0.0]);
+        }
+        assert!(last[0].abs() < 1e-9 && last[1].abs() < 1e-9, "{last:?}");
+    }
+
+    #[test]
+    fn bad_settings_name_the_field() {
+        let s = ImuSwingSettings {
+            cutoff: 60.0,
+            ..Default::default()
+        };
+        assert_eq!(s.validate().unwrap_err().field, "cutoff");
+        let s = ImuSwingSettings {
+            scale: 0.0,
+            ..Default::default()
+        };
+        assert_eq!(s.validate().unwrap_err().field, "scale");
+    }
+}
