@@ -2,8 +2,8 @@
 //! same layer or a lower one (docs/architecture.md, "Layers"). Unit tests inside `src/`
 //! count too; a test that needs a higher layer belongs in `tests/`.
 //!
-//! Order, bottom first: config/error ← linalg ← plant ← sysid (and its fixtures in
-//! `testing`) ← control ← sim ← design.
+//! Order, bottom first: config/error ← linalg ← plant (and the sensor models, `sensors`) ←
+//! sysid (and its fixtures in `testing`) ← control (and `mission`'s guidance) ← sim ← design.
 
 use std::path::{Path, PathBuf};
 
@@ -12,9 +12,9 @@ fn layer(module: &str) -> Option<usize> {
     Some(match module {
         "config" | "error" => 0,
         "linalg" => 1,
-        "plant" => 2,
+        "plant" | "sensors" => 2,
         "sysid" | "testing" => 3,
-        "control" => 4,
+        "control" | "mission" => 4,
         "sim" => 5,
         "design" => 6,
         _ => return None,
