@@ -26,6 +26,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from swingrt.methods import METHODS
 from swingrt.metrics import METRICS, step_metrics
 
 #: ss_error at or above which a flight fails [m/s].
@@ -115,6 +116,7 @@ def fly_sample(
         evaluation_scenario,
         identify_case,
         simulate_controller,
+        train_methods,
         training_scenario,
     )
     from swingrt.sim import _run
@@ -128,6 +130,7 @@ def fly_sample(
     traces: dict[str, Any] = {}
     setup_error = ident_error = ""
     model = lqr = None
+    trained: dict[str, Any] = {}
     try:
         exp = spec.experiment(values, label=f"{spec.name} #{index}")
         axis = "ne" if exp.axes == "ne" else "n"
@@ -159,10 +162,30 @@ def fly_sample(
             if _fatal(exc):
                 raise
             ident_error = f"{type(exc).__name__}: {exc}"
+    method_errors: dict[str, str] = {}
+    if not setup_error and not ident_error and lqr is not None:
+        for ctrl in spec.controllers:
+            if ctrl not in METHODS:
+                continue
+            try:
+                trained.update(train_methods(train, _only(exp, ctrl), model, lqr, train_sc))
+            except BaseException as exc:  # one method failing to train is its row's error
+                if _fatal(exc):
+                    raise
+                method_errors[ctrl] = f"{type(exc).__name__}: {exc}"
     rows = []
     for ctrl in spec.controllers:
-        row: dict[str, Any] = {**common, "controller": ctrl, **ident, "fallback": "", "error": ""}
-        blocked = setup_error or (ident_error if ctrl != "pid" else "")
+        row: dict[str, Any] = {
+            **common,
+            "controller": ctrl,
+            **ident,
+            "fallback": "",
+            "error": "",
+            "training_s": math.nan,
+        }
+        blocked = (
+            setup_error or (ident_error if ctrl != "pid" else "") or method_errors.get(ctrl, "")
+        )
         if blocked:
             rows.append({**row, **nan_metrics, "error": blocked})
             continue
@@ -175,10 +198,13 @@ def fly_sample(
                 lqr_params=lqr,
                 mpc_settings=exp.mpc or None,
                 lqr_settings=exp.lqr or None,
+                method=trained.get(ctrl),
+                budget=exp.tick_budget,
             )
             m = step_metrics(trace, t0=exp.step["t"], axis=axis)
             row.update({c: float(m.get(c, math.nan)) for c in METRICS})
             row["fallback"] = str(extras.get("fallback") or "")
+            row["training_s"] = _training_seconds(ctrl, trained, train)
             traces[ctrl] = trace
             if out is not None:
                 trace.to_parquet(out / f"{ctrl}.parquet")
@@ -194,6 +220,32 @@ def fly_sample(
         row[RATIO] = row[EXCESS] / ref if ref and ref > 0 else math.nan
         row["failure"] = failure_reason(row)
     return rows, traces
+
+
+#: Seconds of training flight a controller's design read (PID: none); wall-clock times
+#: are kept out of the rows, which must not vary (``benches/methods.py`` measures them).
+DATA_COLUMNS = ("training_s",)
+
+
+def _only(exp: Any, ctrl: str) -> Any:
+    """The experiment with one controller (to train one method at a time)."""
+    import copy
+
+    e = copy.copy(exp)
+    e.controllers = [ctrl]
+    return e
+
+
+def _training_seconds(ctrl: str, trained: dict[str, Any], train: Any) -> float:
+    """Seconds of training flight ``ctrl`` read: a method's own count, the whole flight for
+    the DMDc MPC and the white-box LQR, none for PID."""
+    t = trained.get(ctrl)
+    if t is not None:
+        return float(t.training_seconds)
+    if ctrl == "pid":
+        return 0.0
+    tt = train.columns["t"]
+    return float(tt[-1] - tt[0])
 
 
 def fly_batch(raw: dict[str, Any], indices: list[int]) -> tuple[list[dict[str, Any]], float]:

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from swingrt.campaign.flight import (
+    DATA_COLUMNS,
     DIVERGED_SWING_DEG,
     IDENT_COLUMNS,
     SS_ERROR_LIMIT,
@@ -50,7 +51,7 @@ def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
 
 def param_names(rows: Sequence[dict[str, Any]]) -> list[str]:
     """The sampled parameter columns of the rows, in column order."""
-    skip = _NOT_PARAMS | set(IDENT_COLUMNS) | set(metric_columns())
+    skip = _NOT_PARAMS | set(IDENT_COLUMNS) | set(DATA_COLUMNS) | set(metric_columns())
     return [k for k in (rows[0] if rows else {}) if k not in skip]
 
 

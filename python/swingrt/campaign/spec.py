@@ -4,11 +4,14 @@ Top-level keys:
 
 - ``name`` (required), ``description``;
 - ``samples`` (number of samples, > 0), ``seed`` (int, default 0);
-- ``controllers``: subset of ``pid``, ``lqr``, ``mpc`` (default all three);
+- ``controllers``: subset of ``pid``, ``lqr``, ``mpc`` and the methods of
+  :mod:`swingrt.methods` (default ``pid``, ``lqr``, ``mpc``);
 - ``batch_size``: samples per Dask task (default: chosen from the study size);
 - ``[base]``: an experiment's keys (see :mod:`swingrt.experiments`): ``step``,
   ``duration``, ``axes``, ``training_duration``, ``[common]``, ``[training]``,
-  ``[evaluation]``, ``[identify]``, ``[mpc]``, ``[lqr]`` (no ``name``, ``controllers``,
+  ``[evaluation]``, ``[identify]``, ``[mpc]``, ``[lqr]``, the methods' sections
+  (``[shaper]``, ``[payload_p]``, ``[deepc]``, ``[nmpc]``, ``[sindy]``), ``tick_budget`` (no
+  ``name``, ``controllers``,
   ``grid``: the campaign owns those);
 - ``[vary]``: dotted field → distribution (:mod:`swingrt.campaign.sampling`).
 
@@ -40,7 +43,8 @@ from typing import Any
 
 from swingrt.campaign.sampling import Distribution, parse_distribution
 from swingrt.errors import ConfigError
-from swingrt.experiments.schema import Experiment
+from swingrt.experiments.schema import CONTROLLERS, Experiment
+from swingrt.methods import SECTIONS as METHOD_SECTIONS
 
 _TOP_KEYS = {"name", "description", "samples", "seed", "controllers", "batch_size", "base", "vary"}
 _BASE_KEYS = {
@@ -55,8 +59,10 @@ _BASE_KEYS = {
     "identify",
     "mpc",
     "lqr",
+    "tick_budget",
+    *METHOD_SECTIONS,
 }
-_SECTIONS = ("identify", "mpc", "lqr", "training", "evaluation", "step")
+_SECTIONS = ("identify", "mpc", "lqr", "training", "evaluation", "step", *METHOD_SECTIONS)
 _SCALARS = ("duration", "training_duration")
 #: How many draws :func:`load_spec` validates in the core besides the bounds.
 CHECK_DRAWS = 4
@@ -189,7 +195,7 @@ def parse_spec(d: dict[str, Any], source: str = "spec") -> CampaignSpec:
         if not isinstance(ctrls, list) or not ctrls:
             raise ConfigError("controllers: must be a non-empty list", field="controllers")
         for c in ctrls:
-            if c not in ("pid", "lqr", "mpc"):
+            if c not in CONTROLLERS or c in ("mpc_adaptive", "mpc_oracle"):
                 raise ConfigError(f"controllers: unknown controller {c!r}", field="controllers")
         if len(set(ctrls)) != len(ctrls):
             raise ConfigError("controllers: listed twice", field="controllers")

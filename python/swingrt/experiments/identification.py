@@ -1,5 +1,6 @@
 """The identification of an experiment's case: the model for the MPC (search and the
-control-relevant selection) and the white-box estimates for the LQR."""
+control-relevant selection), the white-box estimates for the LQR, and what each method of
+:mod:`swingrt.methods` learns from the same training flight."""
 
 from __future__ import annotations
 
@@ -7,6 +8,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from swingrt.io.flight import Trace
+from swingrt.methods import METHODS
+from swingrt.methods import SECTIONS as METHOD_SECTIONS
 from swingrt.scenario import Scenario
 
 if TYPE_CHECKING:
@@ -43,3 +46,30 @@ def identify_case(
         "c": float(est.get("friction", 0.0)),
     }
     return model, wb, lqr
+
+
+def train_methods(
+    train: Trace, exp: Experiment, model: Any, lqr: dict[str, float], twin: Scenario | None
+) -> dict[str, Any]:
+    """What each controller of :mod:`swingrt.methods` in ``exp.controllers`` learns from
+    the training flight (:func:`swingrt.methods.train`), by name."""
+    from swingrt.methods import train as train_method
+
+    px4 = twin.to_dict().get("controller") if twin is not None else None
+    sections = {s: getattr(exp, s) for s in METHOD_SECTIONS}
+    return {
+        c: train_method(
+            c,
+            train,
+            axes=exp.axes,
+            sections=sections,
+            model=model,
+            whitebox=lqr,
+            px4=px4,
+            identify=exp.identify,
+            mpc_settings=exp.mpc or None,
+            twin=twin,
+        )
+        for c in exp.controllers
+        if c in METHODS
+    }

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from swingrt.experiments.controllers import simulate_controller
-from swingrt.experiments.identification import identify_case
+from swingrt.experiments.identification import identify_case, train_methods
 from swingrt.experiments.notes import adaptation_note, compare_mpc_lqr
 from swingrt.experiments.scenarios import (
     case_step,
@@ -62,6 +62,7 @@ def run_experiment(
         model, wb, lqr = identify_case(
             train, exp, out / f"{case}__error_vs_delays.png", twin=train_sc
         )
+        trained = train_methods(train, exp, model, lqr, train_sc)
         train.to_parquet(out / f"{case}__training.parquet")
         model.save(out / f"{case}__model.json")
         wb.save(out / f"{case}__whitebox.json")
@@ -88,6 +89,8 @@ def run_experiment(
                 adaptive_settings=exp.adaptive or None,
                 prediction_at=step["t"] if exp.prediction_figure else None,
                 twin=train_sc,
+                method=trained.get(ctrl),
+                budget=exp.tick_budget,
             )
             if ctrl == "mpc_adaptive":
                 notes.append(f"{case}: {adaptation_note(ev_sc, extras['events'])}")

@@ -17,6 +17,8 @@ from swingrt.experiments.scenarios import (
     oracle_training_scenario,
     training_scenario,
 )
+from swingrt.methods import METHODS
+from swingrt.methods import SECTIONS as METHOD_SECTIONS
 from swingrt.scenario import read_toml
 
 
@@ -43,10 +45,12 @@ _KNOWN_KEYS = {
     "training_duration",
     "adaptive",
     "cases",
+    "tick_budget",
+    *METHOD_SECTIONS,
 }
 
 #: Controllers an experiment can compare.
-CONTROLLERS = ("pid", "lqr", "mpc", "mpc_adaptive", "mpc_oracle")
+CONTROLLERS = ("pid", "lqr", "mpc", "mpc_adaptive", "mpc_oracle", *METHODS)
 
 #: Keys of one entry of an experiment's ``[cases.<name>]`` table.
 _CASE_KEYS = {"description", "common", "evaluation", "oracle", "step"}
@@ -73,6 +77,14 @@ class Experiment:
     lqr: dict[str, Any] = field(default_factory=dict)
     adaptive: dict[str, Any] = field(default_factory=dict)
     cases: dict[str, dict[str, Any]] = field(default_factory=dict)
+    #: Compute time a controller tick may take before the hand-back to PX4 [s] (None: its
+    #: period, as in flight; a study that scores control apart from timing sets more).
+    tick_budget: float | None = None
+    shaper: dict[str, Any] = field(default_factory=dict)
+    payload_p: dict[str, Any] = field(default_factory=dict)
+    deepc: dict[str, Any] = field(default_factory=dict)
+    nmpc: dict[str, Any] = field(default_factory=dict)
+    sindy: dict[str, Any] = field(default_factory=dict)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], source: str) -> Experiment:
@@ -122,6 +134,18 @@ class Experiment:
             _core.check_settings("mpc", self.mpc)
             _core.check_settings("lqr", self.lqr)
             _core.check_settings("adaptive", self.adaptive)
+            from swingrt.methods import check_settings as check_method
+
+            for sec in METHOD_SECTIONS:
+                check_method(sec, getattr(self, sec))
+            tb = self.tick_budget
+            if tb is not None and not (
+                isinstance(tb, (int, float)) and not isinstance(tb, bool) and 0 < tb <= 60
+            ):
+                raise ConfigError(
+                    f"tick_budget: must be a number of seconds in (0, 60] (got {tb!r})",
+                    field="tick_budget",
+                )
             for case, over in cases(self):
                 try:
                     train = training_scenario(self, over, 0)

@@ -33,10 +33,14 @@
 //! with an active bound solves the QP with the dense active-set method on the constant
 //! factor of H ([`crate::control::mpc::active_set`]).
 //!
-//! **Settings from the training flight.** T_ini, λ_g and λ_y are chosen by the held-out
-//! N-step prediction error of the same regularised predictor (the DeePC problem without
-//! the tracking cost: the least-norm consistent g for the measured past and the future
-//! inputs actually flown) on the part of the flight that identification holds out too.
+//! **Settings from the training flight.** T_ini and λ_y are chosen by the held-out N-step
+//! prediction error of the same regularised predictor (the DeePC problem without the
+//! tracking cost: the least-norm consistent g for the measured past and the future inputs
+//! actually flown) on the part of the flight that identification holds out too. λ_g is
+//! given: a prediction with the inputs given cannot show what it is for (in closed loop a
+//! small λ_g lets the optimiser plan through the data's noise directions: on a simulated
+//! training flight λ_g = 0.1 predicts best and flies the vehicle away at −8 m/s, λ_g ≥ 100
+//! flies the step); `swingrt.methods` chooses it by a step flight on the vehicle's twin.
 
 use nalgebra::{DMatrix, DVector, SymmetricEigen};
 use serde::{Deserialize, Serialize};
@@ -71,9 +75,13 @@ pub struct DeepcSettings {
     pub t_ini: Option<usize>,
     /// Candidates for T_ini [ticks].
     pub t_ini_grid: Vec<usize>,
-    /// Regularisation of ‖g‖² [-] (standardised data); none = chosen from `lambda_g_grid`.
+    /// Regularisation of ‖g‖² [-] (standardised data); none = the largest of
+    /// `lambda_g_grid`.
     pub lambda_g: Option<f64>,
-    /// Candidates for λ_g [-].
+    /// Candidates for λ_g [-]: a closed-loop choice (`swingrt.methods` flies each on the
+    /// vehicle's twin), not a prediction-error one: with the future inputs given, small λ_g
+    /// predicts best, but in the loop the optimiser then steers by the data's noise
+    /// directions.
     pub lambda_g_grid: Vec<f64>,
     /// Weight of the past-output slack ‖σ_y‖² [-] (standardised outputs); none = chosen
     /// from `lambda_y_grid`.
@@ -98,7 +106,7 @@ impl Default for DeepcSettings {
             t_ini: None,
             t_ini_grid: vec![5, 10, 20],
             lambda_g: None,
-            lambda_g_grid: vec![1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0],
+            lambda_g_grid: vec![1.0, 10.0, 100.0, 1e3, 1e4],
             lambda_y: None,
             lambda_y_grid: vec![1e2, 1e4, 1e6],
             holdout_windows: 10,
@@ -455,10 +463,15 @@ impl DeepcController {
             .t_ini
             .map(|t| vec![t])
             .unwrap_or_else(|| settings.t_ini_grid.clone());
-        let grid_g = settings
-            .lambda_g
-            .map(|v| vec![v])
-            .unwrap_or_else(|| settings.lambda_g_grid.clone());
+        // λ_g is not chosen on the prediction error (see the settings); the grid's largest
+        // stands in when none is given.
+        let grid_g = [settings.lambda_g.unwrap_or_else(|| {
+            settings
+                .lambda_g_grid
+                .iter()
+                .copied()
+                .fold(f64::NEG_INFINITY, f64::max)
+        })];
         let grid_y = settings
             .lambda_y
             .map(|v| vec![v])

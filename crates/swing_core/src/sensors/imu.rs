@@ -30,7 +30,7 @@ use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
 use super::filter::LowPass2x3;
-use crate::config::{non_negative, positive, ConfigError};
+use crate::config::{in_range, ConfigError};
 
 /// IMU error model and PX4's IMU filter (defaults: the Gazebo IMU of PX4 SITL, PX4's default
 /// cutoffs, a well-mounted flight controller's vibration).
@@ -103,29 +103,35 @@ impl ImuParams {
 
     /// Check the settings; the error names the offending field.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        non_negative("accel_noise_density", self.accel_noise_density)?;
-        non_negative("accel_random_walk", self.accel_random_walk)?;
-        positive(
+        // Upper bounds far beyond any real IMU (a consumer MEMS part is ~1e-3 of each) keep
+        // every error sample finite at any physics step.
+        in_range("accel_noise_density", self.accel_noise_density, 0.0, 10.0)?;
+        in_range("accel_random_walk", self.accel_random_walk, 0.0, 10.0)?;
+        in_range(
             "accel_bias_correlation_time",
             self.accel_bias_correlation_time,
+            1e-3,
+            1e7,
         )?;
-        non_negative("accel_turn_on_bias", self.accel_turn_on_bias)?;
-        non_negative("gyro_noise_density", self.gyro_noise_density)?;
-        non_negative("gyro_random_walk", self.gyro_random_walk)?;
-        positive(
+        in_range("accel_turn_on_bias", self.accel_turn_on_bias, 0.0, 100.0)?;
+        in_range("gyro_noise_density", self.gyro_noise_density, 0.0, 10.0)?;
+        in_range("gyro_random_walk", self.gyro_random_walk, 0.0, 10.0)?;
+        in_range(
             "gyro_bias_correlation_time",
             self.gyro_bias_correlation_time,
+            1e-3,
+            1e7,
         )?;
-        non_negative("gyro_turn_on_bias", self.gyro_turn_on_bias)?;
+        in_range("gyro_turn_on_bias", self.gyro_turn_on_bias, 0.0, 10.0)?;
         for (i, v) in self.vibration_accel.iter().enumerate() {
-            crate::config::in_range(&format!("vibration_accel[{i}]"), *v, 0.0, 300.0)?;
+            in_range(&format!("vibration_accel[{i}]"), *v, 0.0, 300.0)?;
         }
         for (i, v) in self.vibration_gyro.iter().enumerate() {
-            crate::config::in_range(&format!("vibration_gyro[{i}]"), *v, 0.0, 30.0)?;
+            in_range(&format!("vibration_gyro[{i}]"), *v, 0.0, 30.0)?;
         }
-        positive("rotor_hz", self.rotor_hz)?;
-        crate::config::in_range("accel_cutoff", self.accel_cutoff, 0.0, 1000.0)?;
-        crate::config::in_range("gyro_cutoff", self.gyro_cutoff, 0.0, 1000.0)?;
+        in_range("rotor_hz", self.rotor_hz, 1e-3, 1e5)?;
+        in_range("accel_cutoff", self.accel_cutoff, 0.0, 1000.0)?;
+        in_range("gyro_cutoff", self.gyro_cutoff, 0.0, 1000.0)?;
         Ok(())
     }
 }
@@ -265,7 +271,9 @@ impl Imu {
             // Four motors of random phase add to √2 × each one's amplitude (RMS).
             let per_motor = std::f64::consts::FRAC_1_SQRT_2;
             for (i, t) in thrust.iter().enumerate() {
-                let ratio = (t / self.hover_thrust_each).max(0.0);
+                // Bounded at 100× hover (no real rotor): a wild command keeps the sample finite.
+                let r = t / self.hover_thrust_each;
+                let ratio = if r.is_nan() { 0.0 } else { r.clamp(0.0, 100.0) };
                 let f = self.p.rotor_hz * ratio.sqrt();
                 self.phase[i] =
                     (self.phase[i] + std::f64::consts::TAU * f * self.dt) % std::f64::consts::TAU;
