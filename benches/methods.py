@@ -4,7 +4,9 @@ From the rows of a finished campaign (``swingrt campaign examples/campaigns/meth
 --out DIR``): per controller the failure rate with its 95 % Wilson interval (the campaign's
 failure rule), and the medians of the swing IAE's excess above its floor, the residual
 swing, the velocity settling time and the acceleration command's total variation, with the
-seconds of training flight each design read.
+seconds of training flight each design read; the failures by reason and how often each
+controller had the least swing of a sample; and the medians and failure rates on subsets of
+the samples (light or strong wind, short or long cable, heavy payload, double pendulum).
 
 With ``--timing N`` it also trains every method on the training flights of the first N
 samples and flies each sample's evaluation with the real budget (a tick may take one
@@ -66,6 +68,73 @@ def table(rows: list[dict[str, Any]], ctrls: list[str]) -> list[str]:
             + f" | {data} |"
         )
     return lines
+
+
+#: Subsets of the samples the slice table compares on: (heading, predicate on a row).
+SLICES: tuple[tuple[str, Any], ...] = (
+    ("all", lambda r: True),
+    ("wind < 1 m/s", lambda r: _wind(r) < 1.0),
+    ("wind ≥ 2 m/s", lambda r: _wind(r) >= 2.0),
+    ("cable < 0.6 m", lambda r: r["payload.length"] < 0.6),
+    ("cable > 1.5 m", lambda r: r["payload.length"] > 1.5),
+    ("payload > 0.3 kg", lambda r: r["payload.mass"] > 0.3),
+    ("double pendulum", lambda r: r["payload.kind"] == "double"),
+)
+
+
+def _wind(r: dict[str, Any]) -> float:
+    return math.hypot(r["wind.velocity[0]"], r["wind.velocity[1]"])
+
+
+def reasons(rows: list[dict[str, Any]], ctrls: list[str]) -> list[str]:
+    """Per controller its failures by reason (the campaign's failure rule), and how often
+    it had the least swing excess IAE of the sample's flights that did not fail."""
+    by_sample: dict[int, list[dict[str, Any]]] = {}
+    for r in rows:
+        by_sample.setdefault(r["sample"], []).append(r)
+    wins = dict.fromkeys(ctrls, 0)
+    for sel in by_sample.values():
+        ok = [r for r in sel if not r.get("failure") and r["controller"] in wins]
+        if ok:
+            wins[min(ok, key=lambda r: r["swing_excess_iae_deg_s"])["controller"]] += 1
+    lines = ["| controller | failures by reason | least swing excess in |", "|---|---|---:|"]
+    for c in ctrls:
+        fails: dict[str, int] = {}
+        for r in rows:
+            if r["controller"] == c and r.get("failure"):
+                fails[r["failure"]] = fails.get(r["failure"], 0) + 1
+        text = ", ".join(f"{k} {v}" for k, v in sorted(fails.items(), key=lambda kv: -kv[1]))
+        lines.append(f"| {c} | {text or '—'} | {wins[c] / max(len(by_sample), 1):.0%} |")
+    return lines
+
+
+def slices(rows: list[dict[str, Any]], ctrls: list[str]) -> list[str]:
+    """Median swing excess IAE [deg·s] / failure rate per controller on subsets of the
+    samples (:data:`SLICES`; the sample count under each heading)."""
+    usable = [(h, f) for h, f in SLICES if all(_has(r, f) for r in rows[:1])]
+    sets = [(h, {r["sample"] for r in rows if f(r)}) for h, f in usable]
+    head = "| controller | " + " | ".join(f"{h} (n={len(s)})" for h, s in sets) + " |"
+    lines = [head, "|---|" + "---:|" * len(sets)]
+    for c in ctrls:
+        cells = []
+        for _, samples in sets:
+            sel = [r for r in rows if r["controller"] == c and r["sample"] in samples]
+            if not sel:
+                cells.append("—")
+                continue
+            k = sum(1 for r in sel if r.get("failure"))
+            med = _median([r["swing_excess_iae_deg_s"] for r in sel if not r.get("error")])
+            cells.append(f"{med} / {k / len(sel):.0%}")
+        lines.append(f"| {c} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def _has(row: dict[str, Any], pred: Any) -> bool:
+    try:
+        pred(row)
+    except KeyError:
+        return False
+    return True
 
 
 def timing(spec: Any, samples: int) -> list[str]:
@@ -165,6 +234,11 @@ def main() -> None:
     n = len({r["sample"] for r in rows})
     lines = [f"Campaign {spec.name}: {n} samples, seed {spec.seed}.", ""]
     lines += table(rows, list(spec.controllers))
+    lines += ["", "Failures by reason; share of samples where each had the least swing excess "
+              "of the flights that did not fail:", ""]  # fmt: skip
+    lines += reasons(rows, list(spec.controllers))
+    lines += ["", "Median swing excess IAE [deg·s] / failure rate, by subset of the samples:", ""]
+    lines += slices(rows, list(spec.controllers))
     if a.timing:
         lines += ["", f"Timing over {a.timing} sample(s), real tick budget:", ""]
         lines += timing(spec, a.timing)

@@ -49,14 +49,23 @@ def test_shaper_cancels_the_swing_left_by_px4_even_on_a_mistuned_mode():
         assert shaped["ss_error"] < 0.01
 
 
-# One campaign sample with every core method: trained on the same 90 s flight, flown on a
+# One campaign sample with every method: trained on the same 90 s flight, flown on a
 # vehicle 15 % heavier with a slower motor than the one they were trained on (and whose twin
 # DeePC's λ_g and HAVOKc's selection flew), with wind and swing-sensor noise.
 METHODS_STUDY = {
     "name": "methods-tiny",
     "samples": 1,
     "seed": 5,
-    "controllers": ["pid", "shaper", "shaper_zv", "payload_p", "deepc", "havokc_mpc"],
+    "controllers": [
+        "pid",
+        "shaper",
+        "shaper_zv",
+        "payload_p",
+        "deepc",
+        "havokc_mpc",
+        "sindy_mpc",
+        "nmpc",
+    ],
     "base": {
         "step": {"t": 2.0, "vn": 2.0},
         "duration": 25.0,
@@ -73,7 +82,7 @@ METHODS_STUDY = {
 }
 
 
-def test_every_core_method_flies_a_campaign_sample_on_a_vehicle_not_its_twin():
+def test_every_method_flies_a_campaign_sample_on_a_vehicle_not_its_twin():
     from swingrt.campaign import failure_reason, fly_sample
 
     rows, _ = fly_sample(METHODS_STUDY, 0)
@@ -85,13 +94,14 @@ def test_every_core_method_flies_a_campaign_sample_on_a_vehicle_not_its_twin():
     # Each damps the swing PX4 leaves (the shapers without a swing sensor) and passes the
     # campaign's failure rule. ArduPilot's payload feedback flies but does not damp this
     # 1.2 m cable on the heavier vehicle (the benchmark table shows where it does).
-    for c in ("shaper", "shaper_zv", "deepc", "havokc_mpc"):
+    for c in ("shaper", "shaper_zv", "deepc", "havokc_mpc", "sindy_mpc", "nmpc"):
         assert failure_reason(by[c]) == "", (c, failure_reason(by[c]))
         assert by[c]["residual_swing_deg"] < 0.1 * pid["residual_swing_deg"], c
         assert by[c]["swing_excess_iae_deg_s"] < 0.1 * pid["swing_excess_iae_deg_s"], c
     assert by["pid"]["training_s"] == 0.0
-    # DeePC reads the flight minus the held-out part; the shaper all of it.
+    # DeePC and SINDy read the flight minus the held-out part; the shaper all of it.
     assert 0 < by["deepc"]["training_s"] < by["shaper"]["training_s"] <= 90.0
+    assert by["sindy_mpc"]["training_s"] < by["nmpc"]["training_s"] == 90.0
 
 
 def test_methods_spec_errors_name_the_method_field():

@@ -198,6 +198,12 @@ class HilServer:
             else:
                 select.select([fd], [], [], min(remaining, 0.05))
 
+    def _newest_actuators(self, msg):
+        """``msg`` or the newest HIL_ACTUATOR_CONTROLS already waiting behind it."""
+        while (later := self._read_actuators(0.0)) is not None:
+            msg = later
+        return msg
+
     def _poll_gcs(self) -> None:
         if self.gcs is self.sim:
             return
@@ -361,6 +367,10 @@ class HilServer:
                             f"{CONNECT_TIMEOUT:g} s{': ' + tail if tail else ''}"
                         )
                 if msg is not None:
+                    # Answers to sensor frames sent before lockstep began (or a doubled
+                    # answer) would otherwise queue up and delay every later step's motors
+                    # by the queue's length: fly on the newest.
+                    msg = self._newest_actuators(msg)
                     self._take_controls(msg)
                 plant.step(self._motors)
                 k += 1

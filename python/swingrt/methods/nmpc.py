@@ -12,10 +12,19 @@ input increments w_Δu Δu over the control horizon Nc, the input held after it,
 with a lag the white-box model leaves out; a first-order lag τ estimated from the training
 flight (:func:`estimate_lag`) is part of the prediction (0 leaves it out).
 
-**Offset-free.** A constant velocity disturbance d [m/s²] enters v̇; it is estimated by the
-steady-state Kalman filter of the pair (v, d) with the MPC's noise settings
-(``kf_process_noise``, ``kf_disturbance_noise``, ``kf_measurement_noise``), the measured
-state taken as the prediction's start (as ``measured_state = true`` in the MPC).
+**Offset-free.** A constant acceleration disturbance d [m/s²] adds to the acceleration the
+vehicle sees (drag, wind on the vehicle, a thrust or hover-thrust error): the pendulum feels
+it too, as it feels every acceleration of its hanging point. (Added to v̇ alone, the
+prediction had the payload swing towards the setpoint's acceleration while the vehicle held
+its speed, and the swing-rate cost then kept the plan from closing a steady velocity error:
+0.29 m/s on a 0.31 m cable in 0.7 m/s wind.) A second one, d_θ [rad/s²], adds to θ̈: a
+steady force on the payload (wind) holds it off the vertical, and without d_θ the prediction
+swings it back, which the plan then fights with a steady acceleration (a velocity error
+again). Each is estimated by the steady-state Kalman filter of its pair, (v, d) and
+(θ̇, d_θ), with the MPC's noise settings (``kf_process_noise``, ``kf_disturbance_noise``,
+``kf_measurement_noise``; d_θ ``kf_swing_disturbance_scale`` times as fast, as the MPC's
+swing disturbances), the measured state taken as the prediction's start (as
+``measured_state = true`` in the MPC).
 
 **Solver.** Single shooting over the Nc moves: CasADi builds the residual vector of the
 cost (a sum of squares) and its Jacobian once, with the start state, disturbance, last
@@ -65,8 +74,10 @@ class NmpcSettings:
     kf_process_noise: float = 0.01
     #: Kalman process noise of the disturbance per tick [m/s²].
     kf_disturbance_noise: float = 0.02
-    #: Kalman measurement noise of the velocity [m/s].
+    #: Kalman measurement noise of the velocity [m/s] (and of the swing rate [rad/s]).
     kf_measurement_noise: float = 0.01
+    #: The swing disturbance's process noise relative to the velocity one's [-].
+    kf_swing_disturbance_scale: float = 0.1
     #: Gauss–Newton iterations per tick [-] (1: the real-time iteration).
     max_iter: int = 1
 
@@ -107,7 +118,8 @@ class NmpcSettings:
         if not 1 <= self.control_horizon <= self.horizon:
             raise bad("control_horizon", "must be between 1 and horizon")
         for name in ("period", "acc_max", "w_acc_rate", "kf_process_noise",
-                     "kf_disturbance_noise", "kf_measurement_noise"):  # fmt: skip
+                     "kf_disturbance_noise", "kf_measurement_noise",
+                     "kf_swing_disturbance_scale"):  # fmt: skip
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise bad(name, "must be > 0")
@@ -242,11 +254,11 @@ class Nmpc:
         self.alpha = 1.0 - math.exp(-ts / lag) if lag > 0 else 1.0
         x = ca.SX.sym("x", 4)
         u = ca.SX.sym("u")
-        d = ca.SX.sym("d")
+        d = ca.SX.sym("d", 2)
 
         def rhs(xx, uu, dd):
-            f = dynamics(xx, uu)
-            return ca.vertcat(f[0] + dd, f[1], f[2])
+            f = dynamics(xx, uu + dd[0])
+            return ca.vertcat(f[0], f[1], f[2] + dd[1])
 
         a_next = x[3] + self.alpha * (u - x[3])
         a_mean = u if lag <= 0 else (x[3] + a_next) / 2
@@ -258,35 +270,39 @@ class Nmpc:
         nxt = ca.vertcat(xm + ts / 6 * (k1 + 2 * k2 + 2 * k3 + k4), a_next)
         self._step_fn = ca.Function("step", [x, u, d], [nxt])
         uu = ca.SX.sym("U", nc)
-        # Parameters: x0 (3), d, u_prev, swing one tick back, v_ref, lagged acceleration.
-        par = ca.SX.sym("p", 8)
-        xk = ca.vertcat(par[0:3], par[7])
-        swings = [par[5], par[1]]  # θ_{k−1}, θ_k
+        # Parameters: x0 (3), u_prev, swing one tick back, v_ref, lagged acceleration,
+        # d (2).
+        par = ca.SX.sym("p", 9)
+        xk = ca.vertcat(par[0:3], par[6])
+        swings = [par[4], par[1]]  # θ_{k−1}, θ_k
         res = []
         g_rate = s.w_swing_rate / (2 * ts)
         for i in range(np_):
-            xk = self._step_fn(xk, uu[min(i, nc - 1)], par[3])
-            res.append(s.w_velocity * (xk[0] - par[6]))
+            xk = self._step_fn(xk, uu[min(i, nc - 1)], par[7:9])
+            res.append(s.w_velocity * (xk[0] - par[5]))
             res.append(g_rate * (xk[1] - swings[-2]))
             if s.w_swing > 0:
                 res.append(s.w_swing * xk[1])
             swings.append(xk[1])
         for j in range(nc):
-            prev = par[4] if j == 0 else uu[j - 1]
+            prev = par[3] if j == 0 else uu[j - 1]
             res.append(s.w_acc_rate * (uu[j] - prev))
         r = ca.vertcat(*res)
         self._residual = ca.Function("residual", [uu, par], [r, ca.jacobian(r, uu)])
         self._nc = nc
-        self._gain = _kalman_gain(
-            ts, s.kf_process_noise, s.kf_disturbance_noise, s.kf_measurement_noise
-        )
+        q_v, q_d, r_v = s.kf_process_noise, s.kf_disturbance_noise, s.kf_measurement_noise
+        self._gain = _kalman_gain(ts, q_v, q_d, r_v)
+        self._gain_swing = _kalman_gain(ts, q_v, s.kf_swing_disturbance_scale * q_d, r_v)
         self._u = np.zeros((axes, nc))
-        self._d = np.zeros(axes)
+        self._d = np.zeros((axes, 2))
         self._u_prev = np.zeros(axes)
         self._swing_prev = np.zeros(axes)
-        self._v_pred = np.full(axes, math.nan)
+        self._v_pred = np.full((axes, 2), math.nan)  # predicted v, θ̇
         self._a = np.zeros(axes)
         self.last_iterations = 0
+        # The first solve imports SciPy's solver and runs CasADi's first evaluation (most
+        # of a second): done here, so that the first tick in flight is like the others.
+        self._gauss_newton(np.zeros(nc), [0.0] * 9)
 
     def reset(self, state: Any, acc: Any = None) -> None:
         """Start from a measured state (axes, 3) and acceleration setpoint (bumpless)."""
@@ -296,9 +312,9 @@ class Nmpc:
         self._u_prev = a[: self.axes].copy()
         self._u = np.repeat(self._u_prev[:, None], self._nc, axis=1)
         self._swing_prev = st[:, 1].copy()
-        self._d = np.zeros(self.axes)
+        self._d = np.zeros((self.axes, 2))
         self._a = self._u_prev.copy()
-        self._v_pred = np.full(self.axes, math.nan)
+        self._v_pred = np.full((self.axes, 2), math.nan)
 
     def step(self, state: Any, vel_ref: Any) -> np.ndarray:
         """One tick: the acceleration setpoint per axis [m/s²]."""
@@ -309,11 +325,11 @@ class Nmpc:
         s = self.settings
         out = np.zeros(self.axes)
         for a in range(self.axes):
-            if math.isfinite(self._v_pred[a]):
-                innov = st[a, 0] - self._v_pred[a]
-                self._d[a] += self._gain[1] * innov
+            if math.isfinite(self._v_pred[a, 0]):
+                innov = st[a, [0, 2]] - self._v_pred[a]
+                self._d[a] += (self._gain[1], self._gain_swing[1]) * innov
             x0 = st[a]
-            par = [*x0, self._d[a], self._u_prev[a], self._swing_prev[a], ref[a], self._a[a]]
+            par = [*x0, self._u_prev[a], self._swing_prev[a], ref[a], self._a[a], *self._d[a]]
             uu = np.concatenate([self._u[a, 1:], self._u[a, -1:]])
             uu = np.clip(uu, -s.acc_max, s.acc_max)
             uu, self.last_iterations = self._gauss_newton(uu, par)
@@ -321,7 +337,7 @@ class Nmpc:
             out[a] = uu[0]
             x4 = [*x0, self._a[a]]
             nxt = np.asarray(self._step_fn(x4, uu[0], self._d[a]), dtype=float).reshape(-1)
-            self._v_pred[a] = nxt[0]
+            self._v_pred[a] = nxt[[0, 2]]
             self._a[a] = nxt[3]
             self._swing_prev[a] = x0[1]
             self._u_prev[a] = uu[0]
