@@ -54,7 +54,7 @@ const DEFAULT_ACC_BOUND: f64 = 1.0;
 /// (axis 0 at +amplitude, axis 1 at −0.7 × it, sign flipped every [`HALF_PERIOD`]), calling
 /// `tick` with each tick's wall time [µs] and kind until it returns false or `max_ticks`.
 fn fly(
-    ctrl: &mut MpcController,
+    ctrl: &mut impl SwingController,
     model: &LinearModel,
     amplitude: f64,
     max_ticks: usize,
@@ -167,8 +167,8 @@ pub fn tick_timing(
 
 /// Timing of the adaptive MPC for `swingrt bench` and the criterion bench: the tick with
 /// the online update ([`TickTiming`] in µs) over `n_ticks` ticks in closed loop with
-/// `model` itself as the plant under a ±2 m/s square wave of references (every sample
-/// excited and accepted), then the re-synthesis on the collected factor, `repeats` times
+/// `model` itself as the plant under the square wave of the unconstrained [`tick_timing`]
+/// (every sample excited and accepted), then the re-synthesis on the collected factor, `repeats` times
 /// ([`TickTiming`] in ms).
 pub fn adaptive_timing(
     model: &LinearModel,
@@ -187,28 +187,11 @@ pub fn adaptive_timing(
         ..settings.clone()
     };
     let mut ctrl = AdaptiveMpc::new(model, mpc.clone(), s)?;
-    let mut plant = LinearPlant::new(model)?;
-    let m = ctrl.axes();
-    let mut state = vec![AxisState::default(); m];
-    let mut refs = vec![0.0; m];
-    let mut u = vec![0.0; m];
-    plant.measure(&mut state);
-    ctrl.reset(&state, &u);
-    let half_period = (4.0 / model.dt).round().max(1.0) as usize;
     let mut ticks = Vec::with_capacity(n_ticks);
-    for k in 0..n_ticks {
-        let sign = if (k / half_period) % 2 == 0 {
-            1.0
-        } else {
-            -1.0
-        };
-        refs.iter_mut().for_each(|r| *r = 2.0 * sign);
-        plant.measure(&mut state);
-        let t0 = Instant::now();
-        ctrl.step(&state, &refs, &mut u)?;
-        ticks.push(t0.elapsed().as_secs_f64() * 1e6);
-        plant.step(&u);
-    }
+    fly(&mut ctrl, model, AMPLITUDE, n_ticks, |us, _, _| {
+        ticks.push(us);
+        true
+    })?;
     let mut builds = Vec::with_capacity(repeats);
     for _ in 0..repeats {
         let t0 = Instant::now();
