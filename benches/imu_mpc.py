@@ -26,7 +26,7 @@ from swingrt.experiments.runner import simulate_controller
 from swingrt.io.flight import Trace
 from swingrt.metrics import step_metrics
 from swingrt.scenario import Scenario
-from swingrt.sysid import search
+from swingrt.sysid import identify, search
 
 RHO = 1.225
 
@@ -53,6 +53,10 @@ def main() -> None:
     blind["swing_n"] = np.asarray(train["swing_est_n"])
     blind["swing_e"] = np.asarray(train["swing_est_e"])
     models["imu"] = search(blind, axes="n").model
+    wb = identify(train, method="whitebox", axes="n").diagnostics["whitebox"]
+    lqr = {k: float(wb[w]) for k, w in (("m_q", "vehicle_mass"), ("m_p", "payload_mass"))}
+    lqr["l"] = float(wb["length"])
+    lqr["c"] = float(wb.get("friction", 0.0))
     for k, m in models.items():
         print(
             f"model {k}: q = {m.delays}, p = {m.rank}, test NMAE {m.diagnostics.get('test_nmae')}"
@@ -64,11 +68,13 @@ def main() -> None:
         ("mpc sensor model, sensor", base, "mpc", models["sensor"]),
         ("mpc sensor model, imu", imu, "mpc", models["sensor"]),
         ("mpc imu model, imu", imu, "mpc", models["imu"]),
+        ("lqr, sensor", base, "lqr", None),
+        ("lqr, imu", imu, "lqr", None),
     ]
     keys = ("swing_excess_iae_deg_s", "residual_swing_deg", "peak_swing_deg", "v_settle_s")
     print(f"{'run':28s} " + " ".join(f"{k:>22s}" for k in keys) + "  fallback")
     for name, sc, ctrl, model in runs:
-        tr, extras = simulate_controller(sc, ctrl, axes="n", model=model)
+        tr, extras = simulate_controller(sc, ctrl, axes="n", model=model, lqr_params=lqr)
         m = step_metrics(tr, t0=2.0, axis="n")
         print(
             f"{name:28s} " + " ".join(f"{m[k]:22.3f}" for k in keys) + f"  {extras.get('fallback')}"

@@ -2,12 +2,16 @@
 
 #![allow(clippy::needless_range_loop)]
 
+use std::sync::{Arc, Mutex};
+
 use nalgebra::{Quaternion, Vector3};
 use swing_core::control::px4::AxisSetpoint;
+use swing_core::control::{AxisState, ControlError, ControlOutput, SwingController, TickInfo};
 use swing_core::plant::dynamics::swing_angles;
 use swing_core::plant::{
     Effects, Model, PayloadKind, PayloadParams, PlantState, StepInput, VehicleParams, GRAVITY,
 };
+use swing_core::sensors::{ImuParams, SwingSource};
 use swing_core::sim::{Scenario, SetpointEntry, Simulator};
 
 const IDEAL: Effects = Effects {
@@ -336,4 +340,122 @@ fn acceleration_setpoint_axis_bypasses_the_velocity_pid() {
     // Total system accelerates at about 0.5·(m_Q+m_p)/(m_Q+m_p) m/s² North.
     let v = sim.state().vel.x;
     assert!(v > 1.2 && v < 2.4, "v_N after 4 s: {v}");
+}
+
+/// A controller that flies PX4's own velocity reference (so the flight is PX4's) and
+/// records what it is told at every tick: (swing N, swing rate N).
+struct Recorder(Arc<Mutex<Vec<[f64; 2]>>>);
+
+impl SwingController for Recorder {
+    fn axes(&self) -> usize {
+        1
+    }
+    fn period(&self) -> f64 {
+        0.01
+    }
+    fn output(&self) -> ControlOutput {
+        ControlOutput::Velocity
+    }
+    fn reset(&mut self, _state: &[AxisState], _acc: &[f64]) {}
+    fn step(
+        &mut self,
+        state: &[AxisState],
+        vel_ref: &[f64],
+        out: &mut [f64],
+    ) -> Result<TickInfo, ControlError> {
+        self.0
+            .lock()
+            .unwrap()
+            .push([state[0].swing, state[0].swing_rate]);
+        out[0] = vel_ref[0];
+        Ok(TickInfo::default())
+    }
+}
+
+/// The default step (2 m/s North at 2 s) flown with the swing source `source`, an ideal IMU,
+/// no airframe drag and the estimator's exact pull scale, so that what separates the rate a
+/// controller is told from the true one is the measurement chain's lag. Returns per
+/// controller tick (every 10 ms from 0, the trace's rows): (told swing, told rate, true rate).
+fn told_swing(source: SwingSource, cutoff: f64) -> Vec<[f64; 3]> {
+    let mut sc = Scenario::builtin("step").unwrap();
+    sc.duration = 8.0;
+    sc.sensors.swing = source;
+    sc.sensors.imu = ImuParams::ideal();
+    sc.sensors.estimator.cutoff = cutoff;
+    sc.sensors.estimator.scale = GRAVITY * sc.payload.mass / sc.vehicle.mass;
+    let mut sim = Simulator::new(sc).unwrap();
+    sim.set_effects(Effects {
+        drag: false,
+        ..Effects::default()
+    });
+    let seen = Arc::new(Mutex::new(Vec::new()));
+    sim.attach_controller(Box::new(Recorder(seen.clone())), 0.0, 1.0)
+        .unwrap();
+    sim.run_to_end().unwrap();
+    let tr = sim.take_trace();
+    let truth = tr.column("swing_rate_n").unwrap();
+    let seen = seen.lock().unwrap();
+    seen.iter()
+        .zip(truth)
+        .map(|(s, r)| [s[0], s[1], *r])
+        .collect()
+}
+
+/// The delay [s] (1 ms grid, 0–150 ms) that best aligns `told` rates with the `truth`
+/// (10 ms samples, interpolated) after the step, and the RMS errors at it and at 0 [rad/s].
+fn best_lag(rows: &[[f64; 3]]) -> (f64, f64, f64) {
+    let rms = |lag: f64| {
+        let (mut s, mut n) = (0.0, 0.0);
+        for k in 300..rows.len() {
+            let x = k as f64 - lag / 0.01;
+            let (i, f) = (x.floor() as usize, x - x.floor());
+            let r = rows[i][2] * (1.0 - f) + rows[(i + 1).min(k)][2] * f;
+            s += (rows[k][1] - r).powi(2);
+            n += 1.0;
+        }
+        (s / n).sqrt()
+    };
+    let lag = (0..=150)
+        .map(|ms| ms as f64 * 1e-3)
+        .min_by(|a, b| rms(*a).total_cmp(&rms(*b)))
+        .unwrap();
+    (lag, rms(lag), rms(0.0))
+}
+
+#[test]
+fn controllers_are_told_the_swing_rate_of_their_own_swing_source_not_the_truth() {
+    // A swing sensor's rate is the true one.
+    for r in told_swing(SwingSource::Sensor, 5.0) {
+        assert_eq!(r[1], r[2]);
+    }
+    // Without a sensor on the cable, the rate is the estimate's own filtered derivative: the
+    // backward difference of the swing the controller is told (tick = estimator sample) ...
+    let fs = 100.0;
+    let cutoff = 5.0;
+    let rows = told_swing(SwingSource::Imu, cutoff);
+    for k in 301..rows.len() {
+        let d = (rows[k][0] - rows[k - 1][0]) * fs;
+        assert!((rows[k][1] - d).abs() < 1e-9, "{k}: {} vs {d}", rows[k][1]);
+    }
+    // ... so it lags the true rate by the estimator's low-pass (its group delay at DC plus
+    // half a sample, τ = 49.6 ms), one sample of staleness (the controller runs before the
+    // IMU sample of its step, 10 ms) and PX4's 30 Hz accelerometer filter (7.5 ms at 1 kHz):
+    // 67 ms here.
+    let pi = std::f64::consts::PI;
+    let tau = std::f64::consts::SQRT_2 / (2.0 * fs * (pi * cutoff / fs).tan()) + 0.5 / fs;
+    let (lag, at_lag, at_zero) = best_lag(&rows);
+    assert!(
+        lag > tau + 0.01 && lag < tau + 0.03,
+        "imu lag {lag} s, filter {tau} s"
+    );
+    assert!(at_lag < 0.5 * at_zero, "{at_lag} vs {at_zero}");
+    // The body sensor's reading is differentiated through the same low-pass: τ plus the stale
+    // sample, 59.6 ms.
+    let rows = told_swing(SwingSource::Body, cutoff);
+    let (lag, at_lag, at_zero) = best_lag(&rows);
+    assert!(
+        lag > tau + 0.005 && lag < tau + 0.015,
+        "body lag {lag} s, filter {tau} s"
+    );
+    assert!(at_lag < 0.5 * at_zero, "{at_lag} vs {at_zero}");
 }

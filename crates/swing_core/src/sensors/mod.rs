@@ -15,7 +15,7 @@ pub mod swing;
 pub use cable::{body_angles, compose, BodySensorParams};
 pub use filter::{LowPass2, LowPass2x3};
 pub use imu::{Imu, ImuParams, ImuSample};
-pub use swing::{ImuSwingEstimator, ImuSwingSettings, SwingSource};
+pub use swing::{ImuSwingEstimator, ImuSwingSettings, SwingFilter, SwingSource};
 
 use serde::{Deserialize, Serialize};
 

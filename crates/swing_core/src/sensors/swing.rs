@@ -17,7 +17,9 @@
 //! attitude into the world frame exactly as the body sensor does ([`super::cable::compose`]):
 //! r_b = ((f_x − o_x + d_x)/k̂, (f_y − o_y + d_y)/k̂, 1), θ̂ = (atan2(r_N, r_D),
 //! atan2(r_E, r_D)), then a second-order Butterworth low-pass at `cutoff` removes what is left
-//! of rotor vibration and noise. o is the accelerometer's offset at hover (bias; `tare`
+//! of rotor vibration and noise ([`SwingFilter`], which also gives the swing rate controllers
+//! read: the backward difference of the filtered angle, so the rate carries the same lag as
+//! the angle and never the simulator's truth). o is the accelerometer's offset at hover (bias; `tare`
 //! measures it at the start of each flight, with the payload hanging still), d the modelled
 //! drag specific force removed, d_i = c_lin,i v_b,i + c_quad,i v_b,i |v_b,i| with v_b the
 //! body-frame velocity (still air assumed: wind shows up as swing), the same drag model
@@ -68,7 +70,8 @@ pub struct ImuSwingSettings {
     /// Pull scale k̂: body-horizontal specific force per unit tangent of the cable's
     /// body-relative angle, ≈ g·m_p/m_Q [m/s²].
     pub scale: f64,
-    /// Cutoff of the estimate's low-pass [Hz].
+    /// Cutoff of the estimate's low-pass, and of the one the body sensor's swing is
+    /// differentiated through for its rate (0: no low-pass) [Hz].
     pub cutoff: f64,
     /// Rate the estimator is fed at [Hz] (sets the low-pass coefficients).
     pub rate: f64,
@@ -138,30 +141,26 @@ impl ImuSwingSettings {
 #[derive(Clone, Debug)]
 pub struct ImuSwingEstimator {
     s: ImuSwingSettings,
-    lp: [LowPass2; 2],
+    filter: SwingFilter,
     offset: [f64; 2],
-    started: bool,
     samples: u64,
     tare_samples: u64,
     tare_sum: [f64; 2],
-    out: [f64; 2],
 }
 
 impl ImuSwingEstimator {
     /// A fresh estimator (validates the settings).
     pub fn new(settings: ImuSwingSettings) -> Result<Self, ConfigError> {
         settings.validate()?;
-        let lp = [LowPass2::new(settings.rate, settings.cutoff); 2];
+        let filter = SwingFilter::new(settings.rate, settings.cutoff);
         let tare_samples = (settings.tare * settings.rate).round() as u64;
         Ok(Self {
             offset: settings.offset,
             s: settings,
-            lp,
-            started: false,
+            filter,
             samples: 0,
             tare_samples,
             tare_sum: [0.0; 2],
-            out: [0.0; 2],
         })
     }
 
@@ -179,13 +178,11 @@ impl ImuSwingEstimator {
     pub fn reset(&mut self) {
         *self = Self {
             s: self.s.clone(),
-            lp: [LowPass2::new(self.s.rate, self.s.cutoff); 2],
+            filter: SwingFilter::new(self.s.rate, self.s.cutoff),
             offset: self.s.offset,
-            started: false,
             samples: 0,
             tare_samples: self.tare_samples,
             tare_sum: [0.0; 2],
-            out: [0.0; 2],
         };
     }
 
@@ -225,23 +222,84 @@ impl ImuSwingEstimator {
             if self.samples == self.tare_samples {
                 let n = self.tare_samples as f64;
                 self.offset = [self.tare_sum[0] / n, self.tare_sum[1] / n];
-                // The filters restart on the tared angle, so the switch makes no jump.
-                self.started = false;
+                // The filter restarts on the tared angle, so the switch makes no jump.
+                self.filter.restart();
             }
         }
         let a = self.angle(&accel, rot, &vel);
-        if !self.started {
-            self.lp[0].reset(a[0]);
-            self.lp[1].reset(a[1]);
-            self.started = true;
-        }
-        self.out = [self.lp[0].apply(a[0]), self.lp[1].apply(a[1])];
-        self.out
+        self.filter.update(a)
     }
 
     /// The latest estimate (swing_n, swing_e) [rad] (zeros before the first sample).
     pub fn estimate(&self) -> [f64; 2] {
+        self.filter.angle()
+    }
+
+    /// The latest estimate's rate (N, E) [rad/s]: the backward difference of the filtered
+    /// estimate (zeros before the second sample and right after the tare).
+    pub fn rate_estimate(&self) -> [f64; 2] {
+        self.filter.rate()
+    }
+}
+
+/// A measured swing's low-pass and its rate, both channels (N, E), one sample at a time: the
+/// second-order Butterworth low-pass ([`LowPass2`]), then the backward difference of its
+/// output, d̂_k = (y_k − y_{k−1})·f_s. For a swing at frequency f ≪ f_c the rate lags the
+/// true rate by the filter's group delay at DC, √2/(2 f_s tan(π f_c/f_s)) (≈ √2/(2π f_c)),
+/// plus half a sample, 1/(2 f_s). No allocation.
+#[derive(Clone, Copy, Debug)]
+pub struct SwingFilter {
+    lp: [LowPass2; 2],
+    sample_hz: f64,
+    out: [f64; 2],
+    rate: [f64; 2],
+    started: bool,
+}
+
+impl SwingFilter {
+    /// A filter of cutoff `cutoff_hz` (0: no low-pass, the plain backward difference) for
+    /// samples arriving at `sample_hz` [Hz].
+    pub fn new(sample_hz: f64, cutoff_hz: f64) -> Self {
+        Self {
+            lp: [LowPass2::new(sample_hz, cutoff_hz); 2],
+            sample_hz,
+            out: [0.0; 2],
+            rate: [0.0; 2],
+            started: false,
+        }
+    }
+
+    /// Start over from the next sample (the filter settles on it, its rate 0).
+    pub fn restart(&mut self) {
+        self.started = false;
+    }
+
+    /// Feed one sample (N, E) [rad]; returns the filtered angle [rad].
+    #[inline]
+    pub fn update(&mut self, x: [f64; 2]) -> [f64; 2] {
+        if !self.started {
+            for i in 0..2 {
+                self.lp[i].reset(x[i]);
+            }
+            self.out = x;
+            self.started = true;
+        }
+        for i in 0..2 {
+            let y = self.lp[i].apply(x[i]);
+            self.rate[i] = (y - self.out[i]) * self.sample_hz;
+            self.out[i] = y;
+        }
         self.out
+    }
+
+    /// The latest filtered angle (N, E) [rad] (zeros before the first sample).
+    pub fn angle(&self) -> [f64; 2] {
+        self.out
+    }
+
+    /// The latest rate (N, E) [rad/s] (zeros before the second sample).
+    pub fn rate(&self) -> [f64; 2] {
+        self.rate
     }
 }
 
@@ -333,6 +391,37 @@ mod tests {
             last = est.update([0.3 - 0.24, -0.1, -9.8], &r, [2.0, 0.0, 0.0]);
         }
         assert!(last[0].abs() < 1e-9 && last[1].abs() < 1e-9, "{last:?}");
+    }
+
+    #[test]
+    fn the_filtered_rate_of_a_slow_sine_is_its_derivative_delayed_by_the_group_delay() {
+        // A swing-like sine at 0.5 Hz, sampled at 100 Hz through a 20 Hz Butterworth: the rate
+        // is the sine's derivative delayed by the bilinear Butterworth's group delay at DC,
+        // √2/(2 f_s tan(π f_c/f_s)), plus half a sample (closed form at f ≪ f_c), with unit
+        // gain; undelayed, the error is the delay times the second derivative.
+        let (fs, fc, f) = (100.0, 20.0, 0.5);
+        let pi = std::f64::consts::PI;
+        let w = 2.0 * pi * f;
+        let tau = std::f64::consts::SQRT_2 / (2.0 * fs * (pi * fc / fs).tan()) + 0.5 / fs;
+        let mut filt = SwingFilter::new(fs, fc);
+        let (mut worst_delayed, mut worst_now) = (0.0_f64, 0.0_f64);
+        for k in 0..1000 {
+            let t = k as f64 / fs;
+            filt.update([(w * t).sin(), 0.3]);
+            if t > 2.0 {
+                let r = filt.rate();
+                worst_delayed = worst_delayed.max((r[0] - w * (w * (t - tau)).cos()).abs());
+                worst_now = worst_now.max((r[0] - w * (w * t).cos()).abs());
+                assert!(r[1].abs() < 1e-12);
+            }
+        }
+        assert!(worst_delayed < 0.01 * w, "{worst_delayed}");
+        assert!(worst_now > 0.9 * w * w * tau, "{worst_now}");
+        // The first sample after a restart settles the filter: no rate spike.
+        filt.restart();
+        filt.update([5.0, -5.0]);
+        assert_eq!(filt.rate(), [0.0, 0.0]);
+        assert_eq!(filt.angle(), [5.0, -5.0]);
     }
 
     #[test]

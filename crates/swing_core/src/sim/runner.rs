@@ -23,7 +23,9 @@ use crate::mission::{Guidance, MissionEvent};
 use crate::plant::dynamics::swing_angles;
 use crate::plant::{Effects, Model, PayloadKind, PlantState, StepInput, Wind, GRAVITY};
 use crate::sensors::cable::{body_angles, compose, polynomial};
-use crate::sensors::{Imu, ImuSample, ImuSwingEstimator, ImuSwingSettings, SwingSource};
+use crate::sensors::{
+    Imu, ImuSample, ImuSwingEstimator, ImuSwingSettings, SwingFilter, SwingSource,
+};
 
 /// Errors of a simulation run.
 #[derive(Debug, Error)]
@@ -183,6 +185,8 @@ pub struct Simulator {
     acc_bias: Vector3<f64>,
     imu: Imu,
     swing_est: Option<ImuSwingEstimator>,
+    /// The body sensor's swing differentiated for the controller's swing rate.
+    body_rate: SwingFilter,
     tick_est: Ticker,
     supervisor: ControllerSupervisor,
     /// The mission's guidance, when one is flown, and its start time [s].
@@ -265,6 +269,7 @@ impl Simulator {
             acc_bias,
             imu,
             swing_est: None,
+            body_rate: SwingFilter::new(1.0 / h, 0.0),
             tick_est: Ticker::new(1),
             supervisor: ControllerSupervisor::default(),
             guidance: None,
@@ -336,7 +341,9 @@ impl Simulator {
 
     /// Estimate the swing from the IMU with `settings` from now on (fed every
     /// 1/`settings.rate` s, the tare starting now); with the scenario's swing source `imu` the
-    /// controller flies on this estimate, and the trace logs it as `swing_est_*`.
+    /// controller flies on this estimate and its rate, and the trace logs it as `swing_est_*`.
+    /// With the swing source `body` the sensor's reading is differentiated for the swing rate
+    /// at the same rate and cutoff.
     pub fn set_swing_estimator(&mut self, settings: ImuSwingSettings) -> Result<(), SimError> {
         let steps = 1.0 / (settings.rate * self.h);
         if !(steps >= 1.0 - 1e-9 && (steps - steps.round()).abs() < 1e-6) {
@@ -350,8 +357,10 @@ impl Simulator {
             )
             .into());
         }
+        let body_rate = SwingFilter::new(settings.rate, settings.cutoff);
         let est = ImuSwingEstimator::new(settings).map_err(|e| e.within("swing_estimator"))?;
         self.tick_est = Ticker::at_step(steps.round() as u64, self.step);
+        self.body_rate = body_rate;
         self.swing_est = Some(est);
         Ok(())
     }
@@ -479,6 +488,24 @@ impl Simulator {
         match self.sc.sensors.swing {
             SwingSource::Imu => self.swing_estimate().unwrap_or([f64::NAN; 2]),
             _ => self.measured_swing(),
+        }
+    }
+
+    /// What the controller reads as the swing rate, from the same measurement as
+    /// [`Self::controller_swing`]: the swing sensor's rate (`sensor`), the body sensor's
+    /// reading differentiated through [`SwingFilter`] (`body`), the IMU estimate's filtered
+    /// derivative (`imu`; NaN when no estimator is set).
+    fn controller_swing_rate(&self) -> [f64; 2] {
+        match self.sc.sensors.swing {
+            SwingSource::Sensor => {
+                let t = self.true_swing();
+                [t[2], t[3]]
+            }
+            SwingSource::Body => self.body_rate.rate(),
+            SwingSource::Imu => self
+                .swing_est
+                .as_ref()
+                .map_or([f64::NAN; 2], ImuSwingEstimator::rate_estimate),
         }
     }
 
@@ -628,9 +655,15 @@ impl Simulator {
         let s = self
             .imu
             .sample(f.into(), self.state.rate.into(), self.state.thrust.into());
-        let due = self.tick_est.due();
-        if let (true, Some(est)) = (due, self.swing_est.as_mut()) {
+        if !self.tick_est.due() {
+            return;
+        }
+        if let Some(est) = self.swing_est.as_mut() {
             est.update(s.accel, &rot, self.meas_vel.into());
+        }
+        if self.sc.sensors.swing == SwingSource::Body {
+            let m = self.measured_swing();
+            self.body_rate.update(m);
         }
     }
 
@@ -649,11 +682,10 @@ impl Simulator {
     }
 
     fn controller_tick(&mut self) {
-        let truth = self.true_swing();
         let inputs = TickInputs {
             t: self.time(),
             swing: self.controller_swing(),
-            swing_rate: [truth[2], truth[3]],
+            swing_rate: self.controller_swing_rate(),
             pos: &self.meas_pos,
             vel: &self.meas_vel,
             px4: &self.sc.controller,
