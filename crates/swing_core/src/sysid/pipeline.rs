@@ -98,6 +98,60 @@ pub fn score(
     }
 }
 
+/// An input whose spread in the training data is below this fraction of the best-excited
+/// input's carries no information about its axis: 60 dB below, far under the PX4 cascade's
+/// own noise on an axis it merely holds (a few per cent of a stepped axis), far above the
+/// rounding of an axis that never moved.
+const MIN_RELATIVE_EXCITATION: f64 = 1e-3;
+
+/// Refuse training data in which an input never varied: a model fitted to it has an
+/// arbitrary response to that input (the delay coordinates of an axis at rest span nothing),
+/// and a controller flying it on that axis drifts away. Names the input and its spread.
+pub fn check_excitation(train: &Trajectory<'_>, inputs: &[String]) -> Result<(), SysidError> {
+    // Spreads of the inputs scaled by the largest magnitude (so that no sum overflows); a
+    // spread below 1e-9 of it is rounding, no variation at all.
+    let size = (0..train.len)
+        .flat_map(|k| train.input(k).iter())
+        .fold(1.0_f64, |a, x| a.max(x.abs()));
+    let spread: Vec<f64> = (0..train.m)
+        .map(|j| {
+            let col: Vec<f64> = (0..train.len).map(|k| train.input(k)[j] / size).collect();
+            let len = col.len().max(1) as f64;
+            let mean = col.iter().sum::<f64>() / len;
+            (col.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / len).sqrt()
+        })
+        .collect();
+    let best = spread.iter().copied().fold(0.0, f64::max);
+    let rounding = 1e-9;
+    let name = |j: usize| {
+        inputs
+            .get(j)
+            .cloned()
+            .unwrap_or_else(|| format!("input {j}"))
+    };
+    for (j, &s) in spread.iter().enumerate() {
+        if s <= MIN_RELATIVE_EXCITATION * best || s <= rounding {
+            let what = if best <= rounding {
+                "no input varies in the training data".to_string()
+            } else {
+                let top = spread.iter().position(|&x| x == best).unwrap_or(0);
+                format!(
+                    "input '{}' never varies in the training data (its spread is {:.0e} of \
+                     that of '{}')",
+                    name(j),
+                    s / best,
+                    name(top)
+                )
+            };
+            return Err(data(format!(
+                "{what}: the flight did not excite that axis; identify only the axes it \
+                 stepped, or fly a training flight that steps every axis"
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// Name a fitted model's states and inputs.
 pub fn named(
     mut model: LinearModel,
@@ -242,6 +296,11 @@ pub fn identify(
 ) -> Result<Identified, SysidError> {
     settings.validate()?;
     let (train, test) = split(traj, settings)?;
+    // The data-driven fits learn each input's effect from the data; the white-box takes it
+    // from physics.
+    if settings.method != IdentifyMethod::Whitebox {
+        check_excitation(&train, inputs)?;
+    }
     let (mut model, search_result) = match settings.method {
         IdentifyMethod::Whitebox => {
             let mass = settings.payload_mass.or(payload_mass).ok_or_else(|| {
@@ -382,6 +441,42 @@ mod tests {
             ..log
         };
         assert!(payload_mass_from_thrust(&log, 0, m_q, 1.0).is_err());
+    }
+
+    #[test]
+    fn an_axis_the_flight_never_moved_is_refused_by_name() {
+        // Two inputs: North stepped, East at rest up to rounding (as a North-only flight
+        // identified on both axes gives).
+        let len = 400;
+        let u: Vec<f64> = (0..len)
+            .flat_map(|k| {
+                [
+                    if (k / 50) % 2 == 0 { 1.0 } else { -1.0 },
+                    1e-17 * (k % 3) as f64,
+                ]
+            })
+            .collect();
+        let x = vec![0.0; 2 * len];
+        let traj = Trajectory::new(&x, 2, &u, 2).unwrap();
+        let names = ["acc_n".to_string(), "acc_e".to_string()];
+        let err = check_excitation(&traj, &names).unwrap_err().to_string();
+        assert!(err.contains("'acc_e'") && err.contains("'acc_n'"), "{err}");
+        // The same East input at the level of a held axis' noise (2 % of the stepped one)
+        // is accepted, and so is every input at rest but the whole flight refused.
+        let u: Vec<f64> = (0..len)
+            .flat_map(|k| {
+                [
+                    if (k / 50) % 2 == 0 { 1.0 } else { -1.0 },
+                    0.02 * ((k % 7) as f64 - 3.0) / 3.0,
+                ]
+            })
+            .collect();
+        assert!(check_excitation(&Trajectory::new(&x, 2, &u, 2).unwrap(), &names).is_ok());
+        let still = vec![0.3; 2 * len];
+        let err = check_excitation(&Trajectory::new(&x, 2, &still, 2).unwrap(), &names)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("no input varies"), "{err}");
     }
 
     #[test]
