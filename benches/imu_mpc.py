@@ -22,7 +22,7 @@ import numpy as np
 
 import swingrt
 from swingrt import _core
-from swingrt.experiments.runner import simulate_controller
+from swingrt.experiments import simulate_controller
 from swingrt.io.flight import Trace
 from swingrt.metrics import step_metrics
 from swingrt.scenario import Scenario

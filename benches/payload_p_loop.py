@@ -13,6 +13,8 @@ loop: the swing mode's damping ratio with the feedback gain K_v = SLUP_VEL_P, th
 3. The simulator: the default 2 m/s step flown with the core ``payload_p`` at each K_v
    (residual swing, swing excess IAE, velocity settling time).
 
+Then way 2 by cable length at ArduPilot's default K_v = 0.5 s.
+
 Run:  python benches/payload_p_loop.py
 """
 
@@ -28,6 +30,7 @@ from swingrt.metrics import step_metrics
 from swingrt.scenario import Scenario, resolve
 
 GAINS = (0.0, 0.05, 0.1, 0.25, 0.5)
+CABLES = (0.3, 0.6, 1.0, 2.0, 3.0)
 
 
 def _loop(k_v: float, m_q: float, m_p: float, l: float, px4: dict, tau: float) -> np.ndarray:
@@ -84,6 +87,17 @@ def main() -> None:
         m = step_metrics(Trace(sim.take_trace(), {}), t0=2.0)
         print(f"| {k:g} | {ideal:.3f} | {z:.3f}, {w:.2f} rad/s | {m['residual_swing_deg']:.2f} "
               f"| {m['swing_excess_iae_deg_s']:.1f} | {m['v_settle_s']:.2f} |")  # fmt: skip
+    # The shorter the cable, the faster the swing and the more of PX4's lag it sees.
+    k = 0.5
+    print(f"\nOn PX4's loop by cable length, {m_p} kg payload (linearised):\n")
+    print("| cable [m] | ζ without | ζ with K_v = 0.5 s | ζ ideal tracking (> 1: overdamped) |")
+    print("|---:|---:|---:|---:|")
+    for length in CABLES:
+        w_l = math.sqrt(_core.GRAVITY * (m_q + m_p) / (m_q * length))
+        z0, _ = _swing_mode(_loop(0.0, m_q, m_p, length, px4, tau), w_l)
+        z1, _ = _swing_mode(_loop(k, m_q, m_p, length, px4, tau), w_l)
+        ideal = k * math.sqrt(_core.GRAVITY / length) / 2
+        print(f"| {length:g} | {z0:.3f} | {z1:.3f} | {ideal:.2f} |")
 
 
 if __name__ == "__main__":

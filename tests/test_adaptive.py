@@ -123,7 +123,7 @@ def test_adaptive_mpc_without_a_swap_flies_exactly_as_the_fixed_mpc():
 @pytest.fixture(scope="module")
 def identified():
     """The DMDc model the payload-change experiment identifies for 0.3 kg on 0.5 m."""
-    from swingrt.experiments.runner import (
+    from swingrt.experiments import (
         cases,
         identify_case,
         load_experiment,
@@ -189,7 +189,7 @@ def test_payload_change_adaptive_mpc_matches_the_oracle(case, tmp_path):
 def test_twin_path_in_ten_minutes_of_noisy_hover_changes_nothing(identified):
     """With the twin path on, a hover with swing-sensor noise and no payload change neither
     probes nor re-identifies: noise gives no confident length, the thrust no mass step."""
-    from swingrt.experiments.runner import cases, load_experiment, training_scenario
+    from swingrt.experiments import cases, load_experiment, training_scenario
 
     exp = load_experiment("payload-change")
     train = training_scenario(exp, dict(cases(exp))["vehicle-mass"], 0)
@@ -229,7 +229,7 @@ def test_twin_path_needs_the_twin():
 
 
 def test_an_oracle_controller_needs_its_case_overrides():
-    from swingrt.experiments.runner import Experiment
+    from swingrt.experiments import Experiment
 
     with pytest.raises(ConfigError, match="oracle"):
         Experiment.from_dict(

@@ -179,7 +179,7 @@ def test_a_typo_in_an_experiment_fails_before_anything_flies(tmp_path, cli):
 
 
 def test_compare_mpc_lqr_names_the_better_controller_and_the_alike_metrics():
-    from swingrt.experiments.runner import COMPARED, compare_mpc_lqr
+    from swingrt.experiments.notes import COMPARED, compare_mpc_lqr
 
     lqr = dict.fromkeys(COMPARED, 1.0)
     mpc = {**lqr, "peak_swing_deg": 0.5, "acc_sp_tv": 3.0}

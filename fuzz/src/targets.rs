@@ -10,14 +10,15 @@ use rand_chacha::ChaCha8Rng;
 use serde::de::DeserializeOwned;
 
 use swing_core::config::{from_json_str, from_toml_value, parse_toml};
-use swing_core::control::adaptive::AdaptiveSettings;
+use swing_core::design::adaptive::AdaptiveSettings;
 use swing_core::control::mpc::condense::DisturbanceModel;
 use swing_core::control::px4::Px4Params;
-use swing_core::control::selection::{CheckBounds, SelectionSettings};
+use swing_core::design::selection::{CheckBounds, SelectionSettings};
 use swing_core::control::{
-    mpc_step_check, AxisState, LqrController, LqrSettings, MpcController, MpcSettings,
-    QpSolverKind, StepCheckSettings, SwingController,
+    AxisState, LqrController, LqrSettings, MpcController, MpcSettings, QpSolverKind,
+    SwingController,
 };
+use swing_core::design::{mpc_step_check, StepCheckSettings};
 use swing_core::plant::{PayloadParams, PendulumModel, VehicleParams, WindParams};
 use swing_core::sim::{HilPlant, HilSettings, NoiseParams, Scenario, SetpointEntry, Simulator};
 use swing_core::sysid::pipeline::{identify as run_identify, payload_mass_from_thrust, ThrustLog};

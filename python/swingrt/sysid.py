@@ -302,7 +302,7 @@ def select_for_control(
     **settings: Any,
 ) -> SearchResult:
     """Pick from a search the model to fly an MPC on (control-relevant selection, see
-    ``swing_core::control::selection``): up to ``candidates`` distinct (q, p), the stable
+    ``swing_core::design::selection``): up to ``candidates`` distinct (q, p), the stable
     ones of lowest NMAE first, then (with a ``twin``) those the search did not screen,
     screened in turn, fly
     the MPC (``mpc_settings``) on the white-box model of the same flight,

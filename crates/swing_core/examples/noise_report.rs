@@ -6,8 +6,8 @@
 //! [SETTINGS_JSON]` — the MPC is designed on MODEL (a model file), flown on PLANT (e.g. the
 //! white-box model of the same flight); SETTINGS_JSON overrides MPC settings.
 
-use swing_core::control::check::{noise_gain, MeasurementNoise};
 use swing_core::control::{MpcController, MpcSettings};
+use swing_core::design::check::{noise_gain, MeasurementNoise};
 use swing_core::sysid::LinearModel;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

@@ -12,7 +12,9 @@
 
 pub mod config;
 pub mod control;
+pub mod design;
 pub mod error;
+pub mod linalg;
 pub mod mission;
 pub mod plant;
 pub mod sensors;

@@ -6,9 +6,8 @@ use nalgebra::{DMatrix, DVector};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::control::ControlError;
 use crate::plant::{PendulumModel, GRAVITY};
-use crate::sysid::{LinearModel, Offset};
+use crate::sysid::{LinearModel, Offset, SysidError};
 
 /// A delay-embedded [`LinearModel`] over x = [v, θ] (one axis, input `acc_sp_n`) fitted
 /// by least squares to a seeded random-step simulation of the exact ZOH discretisation
@@ -19,10 +18,10 @@ pub fn delay_model(
     dt: f64,
     delays: usize,
     seed: u64,
-) -> Result<LinearModel, ControlError> {
+) -> Result<LinearModel, SysidError> {
     model.validate()?;
     if !(dt.is_finite() && dt > 0.0) || delays == 0 {
-        return Err(ControlError::Model(format!(
+        return Err(SysidError::Model(format!(
             "delay model: need dt > 0 and delays ≥ 1 (got {dt}, {delays})"
         )));
     }
@@ -66,7 +65,7 @@ pub fn delay_model(
     let svd = omega.transpose().svd(true, true);
     let sol = svd
         .solve(&target.transpose(), 1e-10)
-        .map_err(|e| ControlError::Model(format!("delay model fit: {e}")))?;
+        .map_err(|e| SysidError::Model(format!("delay model fit: {e}")))?;
     let top = sol.transpose(); // n × (nz + 1)
     let mut a = DMatrix::<f64>::zeros(nz, nz);
     a.view_mut((0, 0), (n, nz))
@@ -102,7 +101,7 @@ pub fn pendulum_delay_model(
     delays: usize,
     axes: usize,
     seed: u64,
-) -> Result<LinearModel, ControlError> {
+) -> Result<LinearModel, SysidError> {
     let one = delay_model(model, dt, delays, seed)?;
     match axes {
         1 => Ok(one),
@@ -130,7 +129,7 @@ pub fn pendulum_delay_model(
                 ..one
             })
         }
-        _ => Err(ControlError::Model(format!(
+        _ => Err(SysidError::Model(format!(
             "axes must be 1 or 2 (got {axes})"
         ))),
     }

@@ -6,10 +6,8 @@
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
-use swing_core::control::{
-    AdaptiveMpc, AdaptiveSettings, AxisState, LinearPlant, MpcSettings, SwingController,
-    SynthesisMode,
-};
+use swing_core::control::{AxisState, LinearPlant, MpcSettings, SwingController};
+use swing_core::design::{AdaptiveMpc, AdaptiveSettings, SynthesisMode};
 use swing_core::plant::PendulumModel;
 use swing_core::sysid::LinearModel;
 use swing_core::testing::delay_model;
@@ -213,7 +211,7 @@ fn a_candidate_failing_the_check_is_not_swapped_in() {
     let heavy = model(0.3, 2.0);
     let strict = AdaptiveSettings {
         // No loop reaches zero overshoot and zero final error: every candidate fails.
-        bounds: swing_core::control::selection::CheckBounds {
+        bounds: swing_core::design::selection::CheckBounds {
             overshoot: 1e-12,
             final_error: 1e-12,
             hold_drift: 1e-12,

@@ -69,7 +69,7 @@ fn identify_settings_roundtrip_through_json() {
 
 #[test]
 fn overshoot_is_the_excursion_beyond_the_new_setpoint_in_steps() {
-    use swing_core::control::check::{excursion, overshoot};
+    use swing_core::design::check::{excursion, overshoot};
     // A 2 m/s step up that peaks at 2.5: 25 % of the step beyond the setpoint.
     assert_eq!(overshoot(&[0.5, 1.9, 2.5, 2.1], 0.0, 2.0), 0.25);
     // A step down from 2 to 0 that dips to −0.4: 20 %; never reaching it: negative.
@@ -81,7 +81,7 @@ fn overshoot_is_the_excursion_beyond_the_new_setpoint_in_steps() {
 
 #[test]
 fn default_selection_check_covers_the_drag_of_a_step_into_strong_wind() {
-    use swing_core::control::selection::SelectionSettings;
+    use swing_core::design::selection::SelectionSettings;
     use swing_core::plant::VehicleParams;
     // Quadratic drag ½ ρ C_Q w|w| linearised at airspeed w: ρ C_Q w / m per second. A 2 m/s
     // step into a 2 m/s headwind with a 0.5 kg payload must be among the plants checked, or

@@ -9,8 +9,8 @@
 use nalgebra::{DMatrix, DVector};
 use swing_core::control::lqr::{LqrController, LqrSettings};
 use swing_core::control::mpc::{DisturbanceModel, MpcController, MpcSettings, QpSolverKind};
-use swing_core::control::riccati::{c2d_zoh, care, dare, sampled_lqr};
 use swing_core::control::{AxisState, ControlError, LinearPlant, SwingController, TickKind};
+use swing_core::linalg::{c2d_zoh, care, dare, sampled_lqr};
 use swing_core::plant::PendulumModel;
 use swing_core::sysid::LinearModel;
 use swing_core::testing::delay_model;
@@ -291,7 +291,7 @@ fn mpc_tracks_a_step_without_offset_under_a_constant_input_disturbance() {
 
 #[test]
 fn velocity_only_disturbance_leaves_an_offset_for_an_input_disturbance() {
-    // Why `state` is the default: the seed's velocity-row disturbance cannot explain an
+    // Why `state` is the default: the thesis's velocity-row disturbance cannot explain an
     // input disturbance that also moves the swing row, so a steady offset remains.
     let m = model(0.2, 1.0, 2);
     let s = MpcSettings {
@@ -861,7 +861,7 @@ fn a_horizon_shorter_than_the_swing_period_underdamps_a_two_metre_cable() {
 
 #[test]
 fn step_check_on_its_own_model_matches_an_independent_loop() {
-    use swing_core::control::check::{mpc_step_check, step_check_with, StepCheckSettings};
+    use swing_core::design::check::{mpc_step_check, step_check_with, StepCheckSettings};
     let m = model(0.2, 1.0, 8);
     let check = StepCheckSettings {
         step: 1.5,
@@ -906,7 +906,7 @@ fn step_check_on_its_own_model_matches_an_independent_loop() {
 
 #[test]
 fn step_check_flags_a_plant_the_mpc_cannot_fly() {
-    use swing_core::control::check::{mpc_step_check, StepCheckSettings};
+    use swing_core::design::check::{mpc_step_check, StepCheckSettings};
     let m = model(0.2, 1.0, 8);
     // The same plant with the input acting backwards: any model-based loop runs away.
     let mut wrong = m.clone();
@@ -931,7 +931,7 @@ fn step_check_flags_a_plant_the_mpc_cannot_fly() {
 
 #[test]
 fn step_check_rejects_mismatched_plants_and_bad_settings() {
-    use swing_core::control::check::{mpc_step_check, StepCheckSettings};
+    use swing_core::design::check::{mpc_step_check, StepCheckSettings};
     let m = model(0.2, 1.0, 8);
     let mut other_dt = m.clone();
     other_dt.dt = 0.02;
@@ -1004,7 +1004,7 @@ fn unbounded() -> MpcSettings {
 fn noise_gain_matches_a_seeded_noise_simulation() {
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
-    use swing_core::control::check::{noise_gain, MeasurementNoise};
+    use swing_core::design::check::{noise_gain, MeasurementNoise};
     let model = truncated_flight_model();
     let plant_model = delay_model(&params(0.2, 1.0), TS, 2, 3).unwrap();
     let mut mpc = MpcController::new(&model, unbounded()).unwrap();
@@ -1052,7 +1052,7 @@ fn noise_gain_matches_a_seeded_noise_simulation() {
 /// rate and the input-rate weight of 2 gave 0.43 m/s² here (0.11 now).
 #[test]
 fn measurement_noise_reaches_the_command_attenuated() {
-    use swing_core::control::check::{noise_gain, MeasurementNoise};
+    use swing_core::design::check::{noise_gain, MeasurementNoise};
     let model = truncated_flight_model();
     let noise = MeasurementNoise {
         velocity: 0.02,
@@ -1076,7 +1076,7 @@ fn measurement_noise_reaches_the_command_attenuated() {
 /// eigenvalue modulus passes 1) counts as diverged, and a gain just below that one flies.
 #[test]
 fn step_check_rejects_an_unstable_linear_loop_before_flying() {
-    use swing_core::control::check::{closed_loop_radius, mpc_step_check, StepCheckSettings};
+    use swing_core::design::check::{closed_loop_radius, mpc_step_check, StepCheckSettings};
     let m = model(0.2, 1.0, 8);
     let mpc = MpcController::new(&m, MpcSettings::default()).unwrap();
     let scaled = |k: f64| {

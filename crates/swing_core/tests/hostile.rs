@@ -2,8 +2,9 @@
 //! core panic, hang or allocate without bound; now each is a typed error.
 
 use nalgebra::{DMatrix, DVector};
-use swing_core::control::riccati::{c2d_zoh, eigenvalues, expm, sampled_lqr};
-use swing_core::control::{mpc_step_check, MpcSettings, StepCheckSettings};
+use swing_core::control::MpcSettings;
+use swing_core::design::{mpc_step_check, StepCheckSettings};
+use swing_core::linalg::{c2d_zoh, eigenvalues, expm, sampled_lqr};
 use swing_core::sim::{Scenario, Simulator};
 use swing_core::sysid::metrics::start_points;
 use swing_core::sysid::{Diagnostics, LinearModel, Offset};

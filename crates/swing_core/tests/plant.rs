@@ -310,7 +310,7 @@ fn linearisation_around_hover_matches_the_white_box_model() {
         [(fa[0] - fb[0]) / (2.0 * eps), (fa[1] - fb[1]) / (2.0 * eps)]
     };
     let (d_theta, d_rate, d_acc) = (jac(0), jac(1), jac(2));
-    // Eq. 5.7 with the stable sign (DESIGN §3), 5.8.
+    // Eq. 5.7 with the stable sign (docs/architecture.md, "The reference"), 5.8.
     let expected = [
         (d_theta[0], GRAVITY * mp / mq),
         (d_theta[1], -GRAVITY * (mq + mp) / (l * mq)),

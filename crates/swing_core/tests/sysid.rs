@@ -5,12 +5,13 @@
 use nalgebra::{DMatrix, DVector};
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use swing_core::plant::{PendulumModel, GRAVITY};
+use swing_core::plant::{PayloadKind, PayloadParams, PendulumModel, GRAVITY};
+use swing_core::sim::{Scenario, Simulator};
 use swing_core::sysid::dmdc::{self, DmdcSettings};
 use swing_core::sysid::havokc::{self, HavokcSettings, HavokcSvd};
 use swing_core::sysid::metrics::{rollout_nmae, start_points, Scorer};
 use swing_core::sysid::search::{coarse_to_fine, grid_search, Grid, SearchSettings};
-use swing_core::sysid::whitebox;
+use swing_core::sysid::{links, whitebox};
 use swing_core::sysid::{smooth, LinearModel, Offset, SysidError, Trajectory};
 use swing_core::{Categorized, Category};
 
@@ -589,4 +590,57 @@ fn smoothers_preserve_what_they_should() {
     let var = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64;
     assert!(var(&sm) < 0.3 * var(&noisy));
     assert!(smooth::quadratic(&quad, 2).is_err());
+}
+
+/// Velocity and swing (N) of `seconds` of the builtin training flight with `payload`,
+/// every third sample of the 0.01 s trace (0.03 s, as identification resamples).
+fn training(payload: PayloadParams, swing_std: f64) -> (Vec<f64>, Vec<f64>) {
+    let mut sc = Scenario::builtin("training").unwrap();
+    sc.duration = 300.0;
+    sc.payload = payload;
+    sc.noise.swing_std = swing_std;
+    let trace = Simulator::run(sc).unwrap();
+    let pick = |n: &str| {
+        trace
+            .column(n)
+            .unwrap()
+            .iter()
+            .step_by(3)
+            .copied()
+            .collect()
+    };
+    (pick("vn"), pick("swing_n"))
+}
+
+#[test]
+fn a_double_pendulum_is_found_with_its_links_and_a_single_one_is_not() {
+    let double = PayloadParams {
+        kind: PayloadKind::Double,
+        mass: 0.4,
+        length: 0.8,
+        mass2: 0.11,
+        length2: 0.6,
+        ..PayloadParams::default()
+    };
+    for std in [0.0, 0.005] {
+        let (v, th) = training(double.clone(), std);
+        let d = links::double_pendulum(&v, &th, 0.03, &links::LinkSettings::default())
+            .unwrap_or_else(|| panic!("no second link found at noise {std}"));
+        assert!((d.length - 0.8).abs() < 0.08, "{d:?}");
+        assert!((d.length2 - 0.6).abs() < 0.06, "{d:?}");
+        assert!((d.mass_ratio - 0.275).abs() < 0.05, "{d:?}");
+    }
+    for length in [0.5, 1.5] {
+        let single = PayloadParams {
+            mass: 0.3,
+            length,
+            ..PayloadParams::default()
+        };
+        let (v, th) = training(single, 0.005);
+        let d = links::double_pendulum(&v, &th, 0.03, &links::LinkSettings::default());
+        assert!(
+            d.is_none(),
+            "a single pendulum of {length} m taken for {d:?}"
+        );
+    }
 }

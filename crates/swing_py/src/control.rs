@@ -11,14 +11,13 @@ use numpy::{
 };
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use swing_core::control::check::{self, StepCheckSettings};
+use swing_bench::tick_timing;
 use swing_core::control::lqr::{LqrController, LqrSettings};
-use swing_core::control::mpc::timing::tick_timing;
 use swing_core::control::mpc::{MpcController, MpcSettings};
-use swing_core::control::riccati;
-use swing_core::control::{
-    AdaptiveMpc, AdaptiveSettings, AxisState, ControlError, SwingController, TickInfo, TickKind,
-};
+use swing_core::control::{AxisState, ControlError, SwingController, TickInfo, TickKind};
+use swing_core::design::check::{self, StepCheckSettings};
+use swing_core::design::{AdaptiveMpc, AdaptiveSettings};
+use swing_core::linalg::{riccati, LinalgError};
 use swing_core::plant::PendulumModel;
 use swing_core::testing::pendulum_delay_model;
 
@@ -196,7 +195,7 @@ impl PyMpc {
     }
 }
 
-/// The adaptive MPC (`control::adaptive`) on an identified model: the online DMDc follows
+/// The adaptive MPC (`design::adaptive`) on an identified model: the online DMDc follows
 /// the payload and a checked re-synthesis is swapped in between ticks. For flight the
 /// synthesis runs on a worker thread unless `adaptive` says `synthesis = "deferred"`.
 #[pyclass(name = "AdaptiveMpc", module = "swingrt._core", unsendable)]
@@ -367,7 +366,7 @@ type Riccati = fn(
     &DMatrix<f64>,
     &DMatrix<f64>,
     &DMatrix<f64>,
-) -> Result<riccati::RiccatiSolution, ControlError>;
+) -> Result<riccati::RiccatiSolution, LinalgError>;
 
 fn riccati<'py>(
     py: Python<'py>,
@@ -436,7 +435,7 @@ fn mpc_tick_timing<'py>(
     Ok(d)
 }
 
-/// Timing of the adaptive MPC (`control::adaptive::adaptive_timing`): the tick with the
+/// Timing of the adaptive MPC (`swing_bench::adaptive_timing`): the tick with the
 /// online update over `n_ticks` ticks [µs] and the re-synthesis `repeats` times [ms].
 #[pyfunction]
 #[pyo3(signature = (model, settings=None, adaptive=None, n_ticks=2000, repeats=5))]
@@ -450,9 +449,9 @@ fn adaptive_timing<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let model = model.inner.clone();
     let s: MpcSettings = convert::settings(settings, "settings")?;
-    let a: swing_core::control::AdaptiveSettings = convert::settings(adaptive, "adaptive")?;
+    let a: swing_core::design::AdaptiveSettings = convert::settings(adaptive, "adaptive")?;
     let (tick, build) = py
-        .detach(|| swing_core::control::adaptive::adaptive_timing(&model, &s, &a, n_ticks, repeats))
+        .detach(|| swing_bench::adaptive_timing(&model, &s, &a, n_ticks, repeats))
         .map_err(to_py)?;
     let d = PyDict::new(py);
     for (key, t) in [("tick_us", tick), ("resynthesis_ms", build)] {
@@ -489,7 +488,7 @@ fn pendulum_model(
 }
 
 /// Closed-loop step checks of the MPC on `model_json` flying each linear plant of
-/// `plant_jsons` behind each of `input_lags` (see `swing_core::control::check`; the MPC is
+/// `plant_jsons` behind each of `input_lags` (see `swing_core::design::check`; the MPC is
 /// designed once): a list, plant-major, of dicts of `overshoot`, `final_error`,
 /// `hold_drift` as fractions of the step.
 #[pyfunction]

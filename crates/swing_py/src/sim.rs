@@ -5,12 +5,12 @@ use std::sync::{Mutex, MutexGuard};
 
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
-use swing_core::control::adaptive::TwinPrior;
 use swing_core::control::lqr::{LqrController, LqrSettings};
 use swing_core::control::mpc::{MpcController, MpcSettings};
 use swing_core::control::px4::AxisSetpoint;
-use swing_core::control::twin::Twin;
-use swing_core::control::{AdaptiveMpc, AdaptiveSettings};
+use swing_core::design::adaptive::TwinPrior;
+use swing_core::design::reidentify::Twin;
+use swing_core::design::{AdaptiveMpc, AdaptiveSettings};
 use swing_core::plant::PendulumModel;
 use swing_core::sim::{Scenario, Simulator, Trace, FLIGHT_COLUMNS, STATE_KEYS, TRACE_COLUMNS};
 use swing_core::ConfigError;
@@ -307,7 +307,7 @@ impl PySimulator {
             .map_err(to_py)
     }
 
-    /// Fly the adaptive MPC (`control::adaptive`) designed on `model` with MPC `settings`
+    /// Fly the adaptive MPC (`design::adaptive`) designed on `model` with MPC `settings`
     /// and `adaptive` settings from `engage_at` [s]: the model follows the payload online.
     /// `twin` (the training flight's scenario) with `twin_payload` = (payload mass [kg],
     /// cable length [m], vehicle mass [kg]) the model was identified for enables the twin

@@ -11,8 +11,8 @@ use numpy::{PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use swing_core::control::mpc::MpcSettings;
-use swing_core::control::selection::{self, SelectionSettings};
-use swing_core::control::twin::TwinPlant;
+use swing_core::design::selection::{self, SelectionSettings};
+use swing_core::design::twin::TwinPlant;
 use swing_core::plant::GRAVITY;
 use swing_core::sysid::metrics::rollout_nmae;
 use swing_core::sysid::pipeline::{self, candidate_row, ThrustLog};
@@ -380,7 +380,7 @@ fn check_settings<'py>(
             to_py_object(py, &s)
         }
         "adaptive" => {
-            let s: swing_core::control::AdaptiveSettings =
+            let s: swing_core::design::AdaptiveSettings =
                 crate::convert::settings(settings, section)?;
             s.validate().map_err(within)?;
             to_py_object(py, &s)
@@ -456,7 +456,7 @@ fn identify<'py>(
     Ok((PyLinearModel::wrap(py, out.model)?, search))
 }
 
-/// Control-relevant selection (see `swing_core::control::selection`): from `search` (run on
+/// Control-relevant selection (see `swing_core::design::selection`): from `search` (run on
 /// `x`, `u` with `settings`), the model whose MPC (`mpc` settings) flies the white-box
 /// `plant` within bounds, first flying the vehicle's twin when `twin` (a scenario of the
 /// vehicle) is given. Returns (model, passed).

@@ -43,7 +43,7 @@ from typing import Any
 
 from swingrt.campaign.sampling import Distribution, parse_distribution
 from swingrt.errors import ConfigError
-from swingrt.experiments.runner import CONTROLLERS, Experiment
+from swingrt.experiments.schema import CONTROLLERS, Experiment
 from swingrt.methods import SECTIONS as METHOD_SECTIONS
 
 _TOP_KEYS = {"name", "description", "samples", "seed", "controllers", "batch_size", "base", "vary"}

@@ -16,18 +16,11 @@ step with every controller (:func:`simulate_controller`) and writes the report
 
 from __future__ import annotations
 
-from swingrt.experiments.runner import (
-    Experiment,
-    cases,
-    evaluation_scenario,
-    identify_case,
-    list_experiments,
-    load_experiment,
-    run_experiment,
-    simulate_controller,
-    train_methods,
-    training_scenario,
-)
+from swingrt.experiments.controllers import simulate_controller
+from swingrt.experiments.identification import identify_case, train_methods
+from swingrt.experiments.runner import run_experiment
+from swingrt.experiments.scenarios import cases, evaluation_scenario, training_scenario
+from swingrt.experiments.schema import Experiment, list_experiments, load_experiment
 
 __all__ = [
     "Experiment",

@@ -59,7 +59,7 @@ def run_on_px4(
 ) -> list[dict[str, Any]]:
     """Run the whole comparison on PX4 (module doc); returns the metrics rows."""
     from swingrt import sysid
-    from swingrt.experiments.runner import Experiment
+    from swingrt.experiments.schema import Experiment
     from swingrt.hil.session import HilSession
     from swingrt.io import load_flight
     from swingrt.io.flight import Trace

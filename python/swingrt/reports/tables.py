@@ -7,13 +7,10 @@ import io
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from swingrt.io.atomic import write_text_atomic
 from swingrt.metrics import METRICS
-
-if TYPE_CHECKING:
-    from swingrt.experiments.runner import Experiment
 
 __all__ = ["CSV_COLUMNS", "csv_text", "write_metrics"]
 
@@ -36,7 +33,14 @@ def csv_text(rows: Iterable[Mapping[str, Any]], columns: Sequence[str]) -> str:
     return buf.getvalue()
 
 
-def write_metrics(out: Path, exp: Experiment, rows: list[dict[str, Any]], notes: list[str]) -> None:
+class Titled(Protocol):
+    """What a report needs of its experiment: a name and a description."""
+
+    name: str
+    description: str
+
+
+def write_metrics(out: Path, exp: Titled, rows: list[dict[str, Any]], notes: list[str]) -> None:
     """``metrics.csv`` and ``metrics.md`` (atomic)."""
     formatted = [{k: _fmt(r[k]) for k in CSV_COLUMNS} for r in rows]
     write_text_atomic(out / "metrics.csv", csv_text(formatted, CSV_COLUMNS))

@@ -1,5 +1,5 @@
 //! The baseline LQR swing-damping controller (thesis 5.3); the Riccati solvers it uses
-//! live in [`super::riccati`].
+//! live in [`crate::linalg::riccati`].
 //!
 //! # Baseline LQR (eq. 5.12–5.20)
 //! Longitudinal pendulum model ([`PendulumModel`], eq. 5.7) with integral state x_A = [∫(v_sp − v), v, θ, θ̇]:
@@ -9,9 +9,9 @@
 //!        ⎢0   0      0                    1              ⎥        ⎢ 0  ⎥
 //!        ⎣0   0  −g(m_Q+m_p)/(m_Q l)  −c(m_Q+m_p)/(l² m_Q m_p)⎦        ⎣−1/l⎦
 //! ```
-//! with the stable-pendulum sign in row 4 (the seed's eq. 5.16 prints "+"; DESIGN §3),
+//! with the stable-pendulum sign in row 4 (the thesis's eq. 5.16 prints "+"; docs/architecture.md, "The reference"),
 //! Q = diag(0.1, 10, 0, 100), R = 13 and the law u = K(x_sp − x), x_sp = [0, v_sp, 0, 0]
-//! (eq. 5.18). The seed designs with the continuous gain; this controller runs at the
+//! (eq. 5.18). The thesis designs with the continuous gain; this controller runs at the
 //! 50 Hz velocity-loop rate, so it uses the **exact sampled-data LQR** instead: the model
 //! and the continuous cost (5.19) are discretised together over one zero-order-hold period
 //! (Van Loan 1978), giving A_d, B_d and weights Q_d, R_d, N_d that make the discrete cost
@@ -22,9 +22,9 @@
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
-use super::riccati::{sampled_lqr, RiccatiSolution};
 use super::{AxisState, ControlError, SwingController, TickInfo, TickKind};
 use crate::config::{non_negative, positive, ConfigError};
+use crate::linalg::{sampled_lqr, RiccatiSolution};
 use crate::plant::linear::PendulumModel;
 
 /// Settings of the baseline LQR (eq. 5.20); serde with unknown keys refused.

@@ -10,21 +10,15 @@ use thiserror::Error;
 
 use crate::error::{Categorized, Category};
 
-pub mod adaptive;
-pub mod check;
 pub mod deepc;
 pub mod layout;
 pub mod lqr;
 pub mod mpc;
 pub mod payload_p;
 pub mod plant;
-pub mod riccati;
-pub mod selection;
 pub mod shaper;
-pub mod twin;
 
-pub use adaptive::{AdaptiveMpc, AdaptiveSettings, SynthesisMode};
-pub use check::{mpc_step_check, step_check_with, StepCheck, StepCheckSettings};
+pub use crate::plant::AxisState;
 pub use deepc::{DeepcController, DeepcSettings};
 pub use layout::{AxisColumns, AxisLayout, Measured};
 pub use lqr::{LqrController, LqrSettings};
@@ -32,19 +26,7 @@ pub use mpc::tracking::{TrackTarget, TrackingMpc, TrackingSettings};
 pub use mpc::{MpcController, MpcSettings, QpSolverKind};
 pub use payload_p::{PayloadP, PayloadPSettings};
 pub use plant::LinearPlant;
-pub use riccati::{care, dare, RiccatiSolution};
 pub use shaper::{InputShaper, ShaperKind, ShaperSettings, SwingMode};
-
-/// Measured state of one controlled horizontal axis (North or East).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct AxisState {
-    /// Velocity along the axis [m/s].
-    pub v: f64,
-    /// Payload swing angle in the axis–Down plane [rad].
-    pub swing: f64,
-    /// Swing angle rate [rad/s].
-    pub swing_rate: f64,
-}
 
 /// A reference trajectory over the coming ticks for controllers that track a position with
 /// preview: per step k (k = 0 is now, then every controller tick) and horizontal axis
@@ -123,6 +105,9 @@ pub enum ControlError {
     /// An identification step of a control routine failed (e.g. a refit in selection).
     #[error(transparent)]
     Sysid(#[from] crate::sysid::SysidError),
+    /// A linear-algebra step (Riccati equation, eigenvalues) failed.
+    #[error(transparent)]
+    Linalg(#[from] crate::linalg::LinalgError),
     /// A Riccati equation or other synthesis step has no (stabilising) solution.
     #[error("synthesis failed: {0}")]
     Synthesis(String),
@@ -140,6 +125,7 @@ impl Categorized for ControlError {
             ControlError::Config(_) => Category::Config,
             ControlError::Model(_) => Category::Model,
             ControlError::Sysid(e) => e.category(),
+            ControlError::Linalg(e) => e.category(),
             ControlError::Synthesis(_) => Category::Control,
             ControlError::Solver(_) => Category::Solver,
             ControlError::Input(_) => Category::Data,
@@ -156,7 +142,7 @@ impl Categorized for ControlError {
 }
 
 /// Check one tick's slices: one state, reference and output per axis, all finite.
-pub(crate) fn check_tick_inputs(
+pub fn check_tick_inputs(
     axes: usize,
     state: &[AxisState],
     vel_ref: &[f64],

@@ -328,7 +328,7 @@ impl Px4Cascade {
     /// Position and velocity loop (PX4 `PositionControl::update`), every 1/pos_loop_hz.
     ///
     /// `acc_bias` is added to the acceleration that is turned into tilt and thrust but not
-    /// to the reported setpoint: it models the seed's IMU offset (section 4.6.6).
+    /// to the reported setpoint: it models the thesis's IMU offset (section 4.6.6).
     pub fn position_velocity(
         &mut self,
         sp: &Setpoint,

@@ -130,7 +130,7 @@ pub fn unit_from_swing(swing_n: f64, swing_e: f64) -> Vector3<f64> {
 /// Projected swing angles (North–Down, East–Down) of a link and their rates [rad, rad/s].
 ///
 /// These are what a two-axis crossed-bail angle sensor reads, rotated into the inertial
-/// frame: swing_n = atan2(n_N, n_D), swing_e = atan2(n_E, n_D) (DESIGN §2; the seed's θ and,
+/// frame: swing_n = atan2(n_N, n_D), swing_e = atan2(n_E, n_D) (README "Conventions"; the thesis's θ and,
 /// to first order, φ).
 pub fn swing_angles(n: &Vector3<f64>, ndot: &Vector3<f64>) -> [f64; 4] {
     let (x, y, z) = (n.x, n.y, n.z);

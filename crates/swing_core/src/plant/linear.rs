@@ -2,21 +2,21 @@
 //! suspended payload, the model behind the baseline LQR and the white-box identification.
 //!
 //! State s = [v, θ, θ̇] (velocity [m/s], swing angle [rad], swing rate [rad/s]), input
-//! u = acceleration setpoint [m/s²], with the *stable* sign of the swing stiffness (DESIGN §3
-//! notes the seed's slip in 4.6 and 5.16):
+//! u = acceleration setpoint [m/s²], with the *stable* sign of the swing stiffness (eq. 4.6
+//! and 5.16 of the thesis print the other; docs/architecture.md, "The reference"):
 //! ```text
 //!   v̇ = (g m_p/m_Q) θ + (c/(l m_Q)) θ̇ + u
 //!   θ̈ = −(g (m_Q+m_p)/(m_Q l)) θ − (c (m_Q+m_p)/(l² m_Q m_p)) θ̇ − u/l
 //! ```
 //! with g = [`GRAVITY`]. The discrete model is the zero-order hold
-//! [A_d B_d; 0 I] = exp([A B; 0 0]·dt) ([`crate::control::riccati::c2d_zoh`]).
+//! [A_d B_d; 0 I] = exp([A B; 0 0]·dt) ([`crate::linalg::c2d_zoh`]).
 
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 use super::params::GRAVITY;
 use crate::config::{non_negative, positive, ConfigError};
-use crate::control::riccati::c2d_zoh;
+use crate::linalg::c2d_zoh;
 
 /// Physical parameters of the longitudinal vehicle + payload model (eq. 5.7).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

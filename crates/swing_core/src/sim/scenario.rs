@@ -26,7 +26,7 @@ pub struct NoiseParams {
     /// Standard deviation of the position estimate noise [m].
     pub position_std: f64,
     /// Constant offset between commanded and realised horizontal acceleration (N, E) [m/s²]
-    /// — the seed's IMU offset (section 4.6.6).
+    /// — the thesis's IMU offset (section 4.6.6).
     pub acc_sp_bias: [f64; 2],
 }
 

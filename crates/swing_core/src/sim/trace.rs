@@ -1,4 +1,4 @@
-//! A flight trace: named columns of equal length, logged at a fixed rate (DESIGN §2).
+//! A flight trace: named columns of equal length, logged at a fixed rate (names, units and docs: the `schema!` list below).
 
 /// Declare a row struct of named `f64` fields and the matching name list together, so the
 /// two cannot drift apart: `schema!(Row, NAMES, [field: "doc", …])`.
@@ -31,7 +31,7 @@ macro_rules! schema {
 }
 
 schema!(
-    /// One logged sample of every trace column (DESIGN §2 plus simulator extras), by name.
+    /// One logged sample of every trace column (the flight columns plus simulator extras), by name.
     TraceRow,
     /// Column names every trace has, in order: the fields of [`TraceRow`].
     TRACE_COLUMNS,

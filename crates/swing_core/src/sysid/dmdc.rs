@@ -38,7 +38,7 @@
 //!
 //! Offsets (4.6.6): `mean` subtracts the training input mean from u (stored as
 //! `input_mean`); `affine` appends a constant-1 feature whose coefficient is `c`; `none`
-//! does neither. The returned [`LinearModel`] is in the delay form of DESIGN §7: the top n
+//! does neither. The returned [`LinearModel`] is in the delay form of the model file (`sysid::model`): the top n
 //! rows of `A` are [A_dmd A_d], the rows below are the delay shift.
 
 use faer::Mat;

@@ -3,7 +3,7 @@
 //! A [`Trajectory`] holds N samples of n states and m inputs, time-major
 //! (`x[k·n + i]` is state i at sample k), already resampled to the model's sample time.
 //! The delay-embedded state of frame k with q delays is
-//! z_k = [x_k; x_{k−1}; …; x_{k−q+1}] (newest first, DESIGN §7); the thesis's d_k (4.9) is
+//! z_k = [x_k; x_{k−1}; …; x_{k−q+1}] (newest first, as in the model file, `sysid::model`); the thesis's d_k (4.9) is
 //! the part below x_k, and its a_k (4.16) is the same stack oldest first.
 //! [`feature_matrix`] builds the regression data Ω = [X; X_d; Υ] (4.11–4.13), transposed
 //! so that each row is one time sample.

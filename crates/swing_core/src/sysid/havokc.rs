@@ -13,7 +13,7 @@
 //! Figure 4.4: the first (q−1)·n rows of A_H only shift the delay frames, so they are
 //! forced to exactly 0/1 and the same rows of B_H and c to 0. Only the last n rows
 //! (x_{k+1}) stay fitted. The result is re-ordered newest first into the common delay form
-//! of DESIGN §7. Since V₁V₁ᵀ = I − v_w v_wᵀ (Ṽ has orthonormal columns), Λ needs only a
+//! of the model file (`sysid::model`). Since V₁V₁ᵀ = I − v_w v_wᵀ (Ṽ has orthonormal columns), Λ needs only a
 //! p × p solve.
 
 use faer::Mat;

@@ -29,7 +29,7 @@
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
-use crate::control::riccati::expm;
+use crate::linalg::expm;
 use crate::plant::GRAVITY;
 
 /// Settings of [`double_pendulum`].
@@ -403,61 +403,6 @@ mod tests {
                 (o[i] - want).abs() < 1e-4 * gain.max(1.0),
                 "k={k}: {} vs {want}",
                 o[i]
-            );
-        }
-    }
-
-    /// Velocity and swing (N) of `seconds` of the builtin training flight with `payload`,
-    /// every third sample of the 0.01 s trace (0.03 s, as identification resamples).
-    fn training(payload: crate::plant::PayloadParams, swing_std: f64) -> (Vec<f64>, Vec<f64>) {
-        use crate::sim::{Scenario, Simulator};
-        let mut sc = Scenario::builtin("training").unwrap();
-        sc.duration = 300.0;
-        sc.payload = payload;
-        sc.noise.swing_std = swing_std;
-        let trace = Simulator::run(sc).unwrap();
-        let pick = |n: &str| {
-            trace
-                .column(n)
-                .unwrap()
-                .iter()
-                .step_by(3)
-                .copied()
-                .collect()
-        };
-        (pick("vn"), pick("swing_n"))
-    }
-
-    #[test]
-    fn a_double_pendulum_is_found_with_its_links_and_a_single_one_is_not() {
-        use crate::plant::{PayloadKind, PayloadParams};
-        let double = PayloadParams {
-            kind: PayloadKind::Double,
-            mass: 0.4,
-            length: 0.8,
-            mass2: 0.11,
-            length2: 0.6,
-            ..PayloadParams::default()
-        };
-        for std in [0.0, 0.005] {
-            let (v, th) = training(double.clone(), std);
-            let d = double_pendulum(&v, &th, 0.03, &LinkSettings::default())
-                .unwrap_or_else(|| panic!("no second link found at noise {std}"));
-            assert!((d.length - 0.8).abs() < 0.08, "{d:?}");
-            assert!((d.length2 - 0.6).abs() < 0.06, "{d:?}");
-            assert!((d.mass_ratio - 0.275).abs() < 0.05, "{d:?}");
-        }
-        for length in [0.5, 1.5] {
-            let single = PayloadParams {
-                mass: 0.3,
-                length,
-                ..PayloadParams::default()
-            };
-            let (v, th) = training(single, 0.005);
-            let d = double_pendulum(&v, &th, 0.03, &LinkSettings::default());
-            assert!(
-                d.is_none(),
-                "a single pendulum of {length} m taken for {d:?}"
             );
         }
     }

@@ -14,6 +14,7 @@ pub mod model;
 pub mod online;
 pub mod payload;
 pub mod pipeline;
+pub mod resample;
 pub mod search;
 pub mod settings;
 pub mod smooth;

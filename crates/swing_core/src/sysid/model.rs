@@ -1,6 +1,6 @@
 //! The identified model: a discrete linear state-space over delay coordinates.
 //!
-//! For every method (DESIGN §7) the model acts on the stacked state
+//! For every method the model acts on the stacked state
 //! z_k = [x_k; x_{k-1}; …; x_{k-q+1}] (newest first) as
 //! z_{k+1} = A z_k + B (u_k − input_mean) + c.
 //!
@@ -155,7 +155,7 @@ pub struct LinearModel {
     pub diagnostics: Diagnostics,
 }
 
-/// On-disk form (DESIGN §7).
+/// On-disk form (`swingrt-model/1` JSON; README, "Identification").
 #[derive(Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ModelFile {

@@ -18,7 +18,7 @@
 
 use crate::plant::GRAVITY;
 
-use crate::control::AxisState;
+use crate::plant::AxisState;
 
 /// Ticks over which the total-mass estimate must hold still to count as settled.
 pub const MASS_SETTLE_TICKS: usize = 10;

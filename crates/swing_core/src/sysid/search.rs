@@ -64,7 +64,7 @@ pub struct Grid {
 }
 
 impl Grid {
-    /// The reference grid of the search budget (DESIGN §8): q = 2…60 step 2,
+    /// The reference grid of the search budget (docs/architecture.md, "Budgets"): q = 2…60 step 2,
     /// p = 5…(n·q + m) step 5.
     pub fn reference() -> Self {
         Self {

@@ -71,7 +71,7 @@ impl IdentifyMethod {
 #[serde(rename_all = "lowercase")]
 pub enum SelectBy {
     /// Lowest held-out NMAE among candidates whose MPC passes the closed-loop step check
-    /// (`control::selection`).
+    /// (`design::selection`).
     #[default]
     Control,
     /// Lowest held-out NMAE among stable candidates.

@@ -1,6 +1,6 @@
 //! Augmented prediction model and condensed MPC problem (thesis eq. 5.21–5.34).
 //!
-//! **Augmented model.** From the identified model z⁺ = A z + B (u − ū) + c (DESIGN §7) the
+//! **Augmented model.** From the identified model z⁺ = A z + B (u − ū) + c (`sysid::model`) the
 //! MPC builds ξ = [z; s⁻; d] with
 //! * s⁻ the swing angles of each axis one and two ticks back that the delay stack does not
 //!   already hold (both when q = 1, the older one when q = 2, none for q ≥ 3), so that the
@@ -12,7 +12,7 @@
 //!   two-tick difference has the same gain at the swing frequency (≈ 0.5 Hz, T_s = 30 ms:
 //!   within 1 %) and none at Nyquist;
 //! * d the constant disturbances (d⁺ = d) of eq. 5.32–5.33, in one of three layouts
-//!   ([`DisturbanceModel`]): `velocity` — the seed's B_ud: one per axis on the velocity row
+//!   ([`DisturbanceModel`]): `velocity` — the thesis's B_ud: one per axis on the velocity row
 //!   of the newest frame, entering as T_s·d (d in m/s²); `input` — one per axis entering
 //!   exactly like the input, through B (d in m/s²: thrust/IMU offset, wind force on the
 //!   vehicle); `state` — one per physical state of the newest frame, entering as T_s·d.
@@ -23,7 +23,7 @@
 //!
 //! So ξ⁺ = 𝒜 ξ + ℬ u + c̃ with c̃ = [c − Bū; 0; 0]. Outputs per axis y = [v, ṡ, s] = 𝒞 ξ.
 //!
-//! **Cost** (eq. 5.28–5.31, the MPC Toolbox form the seed uses), decision U = [u₀ … u_{Nc−1}],
+//! **Cost** (eq. 5.28–5.31, the MPC Toolbox form the thesis uses), decision U = [u₀ … u_{Nc−1}],
 //! u_j = u_{Nc−1} for j ≥ Nc (eq. 5.22):
 //! ```text
 //! J = Σ_{i=1}^{Np} ‖W_y (r_{k+i} − y_{k+i})‖² + Σ_{i=0}^{Np−1} ‖W_u (u_{k+i} − u_ss)‖²
@@ -49,7 +49,7 @@ use crate::control::ControlError;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DisturbanceModel {
-    /// One per axis on the velocity row (the seed's B_ud, eq. 5.33) [m/s²].
+    /// One per axis on the velocity row (the thesis's B_ud, eq. 5.33) [m/s²].
     Velocity,
     /// One per axis through the input matrix B [m/s²].
     Input,

@@ -7,7 +7,7 @@
 //! zero on them (the shift is exact) and the filter smooths the whole history from the
 //! stream of newest frames. The a-priori covariance P solves the filter DARE
 //! P = A P Aᵀ − A P Cᵀ (C P Cᵀ + V)⁻¹ C P Aᵀ + W (the dual of the control DARE, solved by
-//! [`crate::control::riccati::dare`] on (Aᵀ, Cᵀ, W, V)); the filter gain is
+//! [`crate::linalg::dare`] on (Aᵀ, Cᵀ, W, V)); the filter gain is
 //! L = P Cᵀ (C P Cᵀ + V)⁻¹. Each tick: ξ̂_{k|k} = ξ̂_{k|k−1} + L (y_k − C ξ̂_{k|k−1}), and after
 //! the input is chosen ξ̂_{k+1|k} = A ξ̂_{k|k} + B u_k + c̃. Both steps are matrix–vector
 //! products into preallocated buffers (no allocation per tick). Most rows of A only copy
@@ -17,8 +17,8 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::control::riccati::dare;
 use crate::control::ControlError;
+use crate::linalg::dare;
 
 /// A steady-state (constant-gain) Kalman filter with measured block C = [I_ny 0].
 #[derive(Clone, Debug)]

@@ -16,7 +16,6 @@ pub mod active_set;
 pub mod condense;
 pub mod estimator;
 pub mod qp;
-pub mod timing;
 pub mod tracking;
 
 use nalgebra::{DMatrix, DVector};
@@ -56,7 +55,7 @@ pub struct MpcSettings {
     pub w_velocity: f64,
     /// Swing-rate weight [1/(rad/s)] (backward difference, eq. 5.27).
     pub w_swing_rate: f64,
-    /// Swing-angle weight [1/rad] (reference: the steady-state swing; 0 = off, as the seed).
+    /// Swing-angle weight [1/rad] (reference: the steady-state swing; 0 = off, as the thesis).
     pub w_swing: f64,
     /// Input weight [1/(m/s²)] around the steady-state input (0 = off).
     pub w_acc: f64,
@@ -70,7 +69,7 @@ pub struct MpcSettings {
     /// Kalman process noise std of the model state per tick [state units: m/s, rad].
     pub kf_process_noise: f64,
     /// Where the estimated disturbances enter: `state` (default, offset-free for any
-    /// constant disturbance), `velocity` (the seed's eq. 5.33) or `input`.
+    /// constant disturbance), `velocity` (the thesis's eq. 5.33) or `input`.
     pub disturbance: DisturbanceModel,
     /// Kalman process noise std of each disturbance per tick [m/s² for velocity/input;
     /// state units per second for state].
@@ -605,7 +604,7 @@ impl MpcController {
     }
 
     /// Which measured quantity each model state of the newest frame is, and each axis'
-    /// swing index in that frame (for the closed-loop linear maps of [`crate::control::check`]).
+    /// swing index in that frame (for the closed-loop linear maps of [`crate::design::check`]).
     pub(crate) fn frame_layout(&self) -> (&[Measured], &[usize], usize) {
         (&self.sources, &self.is, self.n)
     }

@@ -4,8 +4,8 @@
 //! (m_p 0.2 kg, l 1 m) at 0.03 s in 20 delay coordinates (the default q), seed 7, default
 //! MPC and adaptive settings; the plant is the model itself under ±2 m/s velocity steps, so
 //! every sample is excited and enters the estimate. After criterion's runs the median / p99
-//! are printed from `control::adaptive::adaptive_timing`. The twin path's re-identification
-//! (`control::twin`: a twin training flight with 0.3 kg on 1.5 m, then DMDc of the same
+//! are printed from `swing_bench::adaptive_timing`. The twin path's re-identification
+//! (`design::reidentify`: a twin training flight with 0.3 kg on 1.5 m, then DMDc of the same
 //! form, or the default rank search at the model's q = 20 with the control-relevant
 //! selection) is timed too; the MPC design of the swap costs what the re-synthesis does.
 
@@ -13,11 +13,10 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use swing_core::control::adaptive::adaptive_timing;
-use swing_core::control::twin::Twin;
-use swing_core::control::{
-    AdaptiveMpc, AdaptiveSettings, AxisState, LinearPlant, MpcSettings, SwingController,
-};
+use swing_bench::adaptive_timing;
+use swing_core::control::{AxisState, LinearPlant, MpcSettings, SwingController};
+use swing_core::design::reidentify::Twin;
+use swing_core::design::{AdaptiveMpc, AdaptiveSettings};
 use swing_core::plant::PendulumModel;
 use swing_core::sim::Scenario;
 use swing_core::sysid::LinearModel;

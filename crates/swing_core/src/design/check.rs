@@ -431,7 +431,7 @@ pub fn closed_loop_radius(
     lag: f64,
 ) -> Result<f64, ControlError> {
     let nl = lagged_noise_loop(mpc, controller, plant, lag)?;
-    let ev = crate::control::riccati::eigenvalues(&nl.a).ok_or_else(|| {
+    let ev = crate::linalg::eigenvalues(&nl.a).ok_or_else(|| {
         ControlError::Synthesis("closed-loop eigenvalues did not converge".into())
     })?;
     Ok(ev.iter().map(|c| c.norm()).fold(0.0, f64::max))
@@ -462,7 +462,7 @@ pub fn noise_gain(
     ] {
         non_negative(name, v)?;
     }
-    let ev = crate::control::riccati::eigenvalues(&nl.a).ok_or_else(|| {
+    let ev = crate::linalg::eigenvalues(&nl.a).ok_or_else(|| {
         ControlError::Synthesis("closed-loop eigenvalues did not converge".into())
     })?;
     let mut eigenvalues: Vec<(f64, f64)> = ev.iter().map(|c| (c.re, c.im)).collect();

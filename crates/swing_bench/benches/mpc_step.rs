@@ -4,7 +4,7 @@
 //! and the dense active set. Model: the white-box pendulum (m_p 0.2 kg, l 1 m) discretised
 //! at 0.03 s and fitted in 50 delay coordinates (dense top rows, exact shifts below),
 //! seed 7. After criterion's runs the median / p99 per tick are printed from
-//! `control::mpc::timing::tick_timing` (the figures of DESIGN §8).
+//! `swing_bench::tick_timing` (the budgets of docs/architecture.md, "Budgets").
 
 #![allow(clippy::needless_range_loop)]
 
@@ -12,7 +12,7 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use swing_core::control::mpc::timing::tick_timing;
+use swing_bench::tick_timing;
 use swing_core::control::mpc::{MpcController, MpcSettings, QpSolverKind};
 use swing_core::control::{AxisState, LinearPlant, SwingController, TickKind};
 use swing_core::plant::PendulumModel;

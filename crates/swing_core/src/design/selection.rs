@@ -26,9 +26,9 @@ use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use crate::config::{finite, non_negative, positive, ConfigError};
-use crate::control::check::{step_check_with, StepCheck, StepCheckSettings};
-use crate::control::twin::{TwinFlight, TwinHold, TwinPlant};
 use crate::control::{ControlError, MpcController, MpcSettings};
+use crate::design::check::{step_check_with, StepCheck, StepCheckSettings};
+use crate::design::twin::{TwinFlight, TwinHold, TwinPlant};
 use crate::sysid::pipeline::{self, candidate_row};
 use crate::sysid::search::SearchResult;
 use crate::sysid::{IdentifySettings, LinearModel, Trajectory};

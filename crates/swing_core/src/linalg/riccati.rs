@@ -1,5 +1,5 @@
-//! Riccati solvers: CARE, DARE (with cross term), ZOH discretisation and the exact
-//! sampled-data LQR. Generic over the model; used by the LQR, the MPC and its estimator.
+//! Riccati solvers: CARE, DARE (with cross term) and the exact sampled-data LQR. Generic
+//! over the model; used by the LQR, the MPC and its estimator.
 //!
 //! # Riccati equations
 //! * CARE: AᵀP + PA − PBR⁻¹BᵀP + Q = 0, K = R⁻¹BᵀP (u = −Kx).
@@ -18,11 +18,11 @@
 //!   A cross term N (cost xᵀQx + 2xᵀNu + uᵀRu) is removed by Ā = A − BR⁻¹Nᵀ, Q̄ = Q − NR⁻¹Nᵀ.
 //!
 //! Every solution is checked: relative residual of the equation ≤ 1e-8 and a stable closed
-//! loop (Re λ(A − BK) < 0, resp. |λ(A − BK)| < 1), otherwise [`ControlError::Synthesis`].
+//! loop (Re λ(A − BK) < 0, resp. |λ(A − BK)| < 1), otherwise [`LinalgError::NoSolution`].
 
 use nalgebra::DMatrix;
 
-use super::ControlError;
+use super::{eigenvalues, expm, LinalgError, EXPM_MAX_ENTRY};
 
 /// A Riccati solution: gain K (u = −Kx), stabilising solution P and its relative residual.
 #[derive(Clone, Debug)]
@@ -54,10 +54,10 @@ fn check_dims(
     b: &DMatrix<f64>,
     q: &DMatrix<f64>,
     r: &DMatrix<f64>,
-) -> Result<(), ControlError> {
+) -> Result<(), LinalgError> {
     let n = a.nrows();
     let m = b.ncols();
-    let bad = |w: &str| Err(ControlError::Model(format!("Riccati: {w}")));
+    let bad = |w: &str| Err(LinalgError::Shape(format!("Riccati: {w}")));
     if n == 0 || a.ncols() != n {
         return bad(&format!(
             "A must be square and non-empty (got {}×{})",
@@ -109,13 +109,13 @@ pub fn care(
     b: &DMatrix<f64>,
     q: &DMatrix<f64>,
     r: &DMatrix<f64>,
-) -> Result<RiccatiSolution, ControlError> {
+) -> Result<RiccatiSolution, LinalgError> {
     check_dims(a, b, q, r)?;
     let n = a.nrows();
     let rinv = r
         .clone()
         .try_inverse()
-        .ok_or_else(|| ControlError::Synthesis("R is singular".into()))?;
+        .ok_or_else(|| LinalgError::NoSolution("R is singular".into()))?;
     let g = b * &rinv * b.transpose();
     let mut z = DMatrix::<f64>::zeros(2 * n, 2 * n);
     z.view_mut((0, 0), (n, n)).copy_from(a);
@@ -123,7 +123,7 @@ pub fn care(
     z.view_mut((n, 0), (n, n)).copy_from(&(-q));
     z.view_mut((n, n), (n, n)).copy_from(&(-a.transpose()));
     let fail = || {
-        ControlError::Synthesis(
+        LinalgError::NoSolution(
             "CARE: Hamiltonian has eigenvalues on the imaginary axis (no stabilising solution; \
              check stabilisability of (A, B) and detectability of (A, Q))"
                 .into(),
@@ -167,27 +167,27 @@ pub fn care(
     let mut p = lhs
         .svd(true, true)
         .solve(&rhs, 1e-14)
-        .map_err(|e| ControlError::Synthesis(format!("CARE: least squares failed: {e}")))?;
+        .map_err(|e| LinalgError::NoSolution(format!("CARE: least squares failed: {e}")))?;
     symmetrize(&mut p);
     let k = &rinv * b.transpose() * &p;
     let res = a.transpose() * &p + &p * a - &p * &g * &p + q;
     let residual =
         res.norm() / (1.0 + q.norm() + 2.0 * (a.norm() * p.norm()) + (&p * &g * &p).norm());
     if residual.is_nan() || residual > RESIDUAL_TOL {
-        return Err(ControlError::Synthesis(format!(
+        return Err(LinalgError::NoSolution(format!(
             "CARE residual {residual:.3e} exceeds {RESIDUAL_TOL:.0e}"
         )));
     }
     let acl = a - b * &k;
     let max_re = eigenvalues(&acl)
         .ok_or_else(|| {
-            ControlError::Synthesis("CARE: closed-loop eigenvalues did not converge".into())
+            LinalgError::NoSolution("CARE: closed-loop eigenvalues did not converge".into())
         })?
         .iter()
         .map(|l| l.re)
         .fold(f64::NEG_INFINITY, f64::max);
     if max_re >= 0.0 {
-        return Err(ControlError::Synthesis(format!(
+        return Err(LinalgError::NoSolution(format!(
             "CARE: closed loop not stable (max Re λ = {max_re:.3e})"
         )));
     }
@@ -201,7 +201,7 @@ pub fn dare(
     b: &DMatrix<f64>,
     q: &DMatrix<f64>,
     r: &DMatrix<f64>,
-) -> Result<RiccatiSolution, ControlError> {
+) -> Result<RiccatiSolution, LinalgError> {
     let n_zero = DMatrix::<f64>::zeros(a.nrows(), b.ncols());
     dare_with_cross(a, b, q, r, &n_zero)
 }
@@ -213,11 +213,11 @@ pub fn dare_with_cross(
     q: &DMatrix<f64>,
     r: &DMatrix<f64>,
     cross: &DMatrix<f64>,
-) -> Result<RiccatiSolution, ControlError> {
+) -> Result<RiccatiSolution, LinalgError> {
     check_dims(a, b, q, r)?;
     let n = a.nrows();
     if cross.nrows() != n || cross.ncols() != b.ncols() {
-        return Err(ControlError::Model(format!(
+        return Err(LinalgError::Shape(format!(
             "Riccati: N must be {n}×{} (got {}×{})",
             b.ncols(),
             cross.nrows(),
@@ -227,7 +227,7 @@ pub fn dare_with_cross(
     let rinv = r
         .clone()
         .try_inverse()
-        .ok_or_else(|| ControlError::Synthesis("R is singular".into()))?;
+        .ok_or_else(|| LinalgError::NoSolution("R is singular".into()))?;
     let abar = a - b * &rinv * cross.transpose();
     let mut qbar = q - cross * &rinv * cross.transpose();
     symmetrize(&mut qbar);
@@ -237,7 +237,7 @@ pub fn dare_with_cross(
     symmetrize(&mut gk);
     let mut hk = qbar.clone();
     let fail = |why: &str| {
-        ControlError::Synthesis(format!(
+        LinalgError::NoSolution(format!(
             "DARE: {why} (check stabilisability of (A, B) and detectability of (A, Q))"
         ))
     };
@@ -280,66 +280,24 @@ pub fn dare_with_cross(
     let res = a.transpose() * &p * a - &p - (a.transpose() * &p * b + cross) * &k + q;
     let residual = res.norm() / (1.0 + q.norm() + p.norm() * (1.0 + a.norm() * a.norm()));
     if residual.is_nan() || residual > RESIDUAL_TOL {
-        return Err(ControlError::Synthesis(format!(
+        return Err(LinalgError::NoSolution(format!(
             "DARE residual {residual:.3e} exceeds {RESIDUAL_TOL:.0e}"
         )));
     }
     let acl = a - b * &k;
     let rho = eigenvalues(&acl)
         .ok_or_else(|| {
-            ControlError::Synthesis("DARE: closed-loop eigenvalues did not converge".into())
+            LinalgError::NoSolution("DARE: closed-loop eigenvalues did not converge".into())
         })?
         .iter()
         .map(|l| l.norm())
         .fold(0.0, f64::max);
     if rho >= 1.0 {
-        return Err(ControlError::Synthesis(format!(
+        return Err(LinalgError::NoSolution(format!(
             "DARE: closed loop not stable (spectral radius {rho:.6})"
         )));
     }
     Ok(RiccatiSolution { k, p, residual })
-}
-
-/// Largest entry magnitude [`expm`] accepts. nalgebra's `exp` squares 2^s times with s from
-/// a norm of A⁸ or A¹⁰; entries near 1e31 overflow that norm to ∞, s saturates to u64::MAX
-/// and the call never returns. A physical model scaled by a sample time is nowhere near.
-pub const EXPM_MAX_ENTRY: f64 = 1e15;
-
-/// Matrix exponential, or `None` for a matrix with a non-finite or huge entry (see
-/// [`EXPM_MAX_ENTRY`]) instead of nalgebra's endless squaring.
-pub fn expm(m: &DMatrix<f64>) -> Option<DMatrix<f64>> {
-    if m.iter().all(|v| v.is_finite() && v.abs() <= EXPM_MAX_ENTRY) {
-        Some(m.exp())
-    } else {
-        None
-    }
-}
-
-/// Eigenvalues of a square matrix, or `None` when it has a non-finite entry or the Schur
-/// iteration does not converge within a bounded number of sweeps (nalgebra's
-/// `complex_eigenvalues` loops without bound on some badly scaled inputs).
-pub fn eigenvalues(m: &DMatrix<f64>) -> Option<Vec<nalgebra::Complex<f64>>> {
-    if !m.iter().all(|v| v.is_finite()) {
-        return None;
-    }
-    let schur = nalgebra::linalg::Schur::try_new(m.clone(), f64::EPSILON, 10_000)?;
-    Some(schur.complex_eigenvalues().iter().copied().collect())
-}
-
-/// Zero-order-hold discretisation of ẋ = Ax + Bu over `dt`: (A_d, B_d) = blocks of
-/// exp([A B; 0 0] dt).
-pub fn c2d_zoh(a: &DMatrix<f64>, b: &DMatrix<f64>, dt: f64) -> (DMatrix<f64>, DMatrix<f64>) {
-    let n = a.nrows();
-    let m = b.ncols();
-    let mut f = DMatrix::<f64>::zeros(n + m, n + m);
-    f.view_mut((0, 0), (n, n)).copy_from(a);
-    f.view_mut((0, n), (n, m)).copy_from(b);
-    // Out of range (see `expm`): NaN blocks, which every caller's finiteness check refuses.
-    let e = expm(&(f * dt)).unwrap_or_else(|| DMatrix::from_element(n + m, n + m, f64::NAN));
-    (
-        e.view((0, 0), (n, n)).into_owned(),
-        e.view((0, n), (n, m)).into_owned(),
-    )
 }
 
 /// Exact sampled-data LQR (Van Loan 1978): discretise the model and the continuous cost
@@ -351,10 +309,10 @@ pub fn sampled_lqr(
     q: &DMatrix<f64>,
     r: &DMatrix<f64>,
     dt: f64,
-) -> Result<(RiccatiSolution, DMatrix<f64>, DMatrix<f64>), ControlError> {
+) -> Result<(RiccatiSolution, DMatrix<f64>, DMatrix<f64>), LinalgError> {
     check_dims(a, b, q, r)?;
     if !(dt.is_finite() && dt > 0.0) {
-        return Err(ControlError::Model(format!(
+        return Err(LinalgError::Shape(format!(
             "sampled LQR: period must be > 0 (got {dt})"
         )));
     }
@@ -373,7 +331,7 @@ pub fn sampled_lqr(
     big.view_mut((0, nm), (nm, nm)).copy_from(&qc);
     big.view_mut((nm, nm), (nm, nm)).copy_from(&f);
     let e = expm(&(big * dt)).ok_or_else(|| {
-        ControlError::Model(format!(
+        LinalgError::Shape(format!(
             "sampled LQR: model × period has entries beyond {EXPM_MAX_ENTRY:e} or non-finite ones"
         ))
     })?;
@@ -440,17 +398,17 @@ mod tests {
         let r = DMatrix::identity(1, 1);
         assert!(matches!(
             dare(&a, &b, &q, &r),
-            Err(ControlError::Synthesis(_))
+            Err(LinalgError::NoSolution(_))
         ));
         let ac = DMatrix::from_row_slice(2, 2, &[0.5, 0.0, 0.0, -1.0]);
         assert!(matches!(
             care(&ac, &b, &q, &r),
-            Err(ControlError::Synthesis(_))
+            Err(LinalgError::NoSolution(_))
         ));
         let bad_r = DMatrix::from_element(1, 1, -1.0);
         assert!(matches!(
             dare(&a, &b, &q, &bad_r),
-            Err(ControlError::Model(_))
+            Err(LinalgError::Shape(_))
         ));
     }
 }

@@ -1,184 +1,13 @@
-//! The vehicle's twin: swingrt's own simulator of the vehicle under PX4's cascade, used to
-//! re-identify the delay-coordinate model for a payload measured in flight.
-//!
-//! A payload change leaves too little closed-loop data for a data-driven refit before the
-//! next manoeuvre (the adaptive MPC's online DMDc needs minutes of excitation to match a
-//! training flight). What the flight does give within a second or two is the payload's
-//! physics: the cable length from the pendulum's equation of motion and the mass from the
-//! thrust (`sysid::payload`). The twin turns those into a model of the same form as the
-//! one identified before the flight: it flies the training flight (the same random steps)
-//! with the measured payload and fits DMDc with the original model's delays, rank and
-//! offset. Whatever the twin gets wrong about the vehicle, the original model also
-//! carried, because both come from a training flight of the same vehicle; on a real
-//! vehicle the twin's fidelity (PX4's gains, the attitude loop's lag) bounds what this
-//! gives, which is why the candidate still goes through the closed-loop check.
+//! The vehicle's twin as a check plant: swingrt's nonlinear simulator of the vehicle under
+//! PX4's cascade, carrying the payload of the flight's white-box, on which a candidate's
+//! MPC flies a velocity step (and holds it) before it is flown on the linear plants.
 
-use super::check::{overshoot, StepCheck};
-use super::selection::{select_for_control, SelectionSettings};
-use super::{ControlError, MpcController, MpcSettings};
 use crate::config::{positive, ConfigError};
+use crate::control::{ControlError, MpcController, MpcSettings};
+use crate::design::check::{overshoot, StepCheck};
 use crate::plant::{PayloadKind, WindParams};
 use crate::sim::{NoiseParams, Scenario, SetpointEntry, SimError, Simulator};
-use crate::sysid::dmdc::{self, DmdcSettings};
-use crate::sysid::hankel::Trajectory;
-use crate::sysid::pipeline::named;
-use crate::sysid::pipeline::{search, split, whitebox_model};
-use crate::sysid::settings::IdentifySettings;
 use crate::sysid::LinearModel;
-
-/// Shortest twin training flight [s]: below this a model of a 20-frame delay stack is
-/// poorly determined.
-pub const MIN_TWIN_SECONDS: f64 = 20.0;
-
-/// The twin and what it re-identifies.
-#[derive(Clone, Debug)]
-pub struct Twin {
-    scenario: Scenario,
-    vehicle_mass: f64,
-    search: bool,
-}
-
-/// Share of the twin's flight held out to score the search's candidates.
-pub const TEST_FRACTION: f64 = 0.25;
-
-impl Twin {
-    /// A twin that flies `training` (the scenario of the training flight, random steps and
-    /// all) for `seconds` with the payload it is asked about; `vehicle_mass` [kg] is the
-    /// vehicle's own mass as identified (the total mass less it is the payload's).
-    /// With `search`, the rank is searched at the template's delays and the candidate picked
-    /// by the control-relevant selection; without, the template's rank is kept.
-    pub fn new(
-        training: &Scenario,
-        seconds: f64,
-        vehicle_mass: f64,
-        search: bool,
-    ) -> Result<Self, String> {
-        if !(seconds.is_finite() && seconds >= MIN_TWIN_SECONDS) {
-            return Err(format!(
-                "twin duration must be at least {MIN_TWIN_SECONDS} s, not {seconds}"
-            ));
-        }
-        if !(vehicle_mass.is_finite() && vehicle_mass > 0.0) {
-            return Err(format!("vehicle mass must be positive, not {vehicle_mass}"));
-        }
-        let mut scenario = training.clone();
-        scenario.duration = seconds;
-        scenario.payload.events.clear();
-        scenario.validate().map_err(|e| e.to_string())?;
-        Ok(Self {
-            scenario,
-            vehicle_mass,
-            search,
-        })
-    }
-
-    /// The vehicle's own mass [kg].
-    pub fn vehicle_mass(&self) -> f64 {
-        self.vehicle_mass
-    }
-
-    /// Fly the twin with a single payload of `mass` [kg] on `length` [m] and fit a model of
-    /// `template`'s form (method DMDc, its delays, offset, sample time, state and input
-    /// names; its rank, or with `search` the rank selected for the MPC of `mpc`).
-    pub fn identify(
-        &self,
-        template: &LinearModel,
-        mass: f64,
-        length: f64,
-        mpc: &MpcSettings,
-    ) -> Result<LinearModel, String> {
-        if template.method != "dmdc" {
-            return Err(format!(
-                "the twin re-identifies DMDc models, not {}",
-                template.method
-            ));
-        }
-        let mut sc = self.scenario.clone();
-        sc.payload.kind = PayloadKind::Single;
-        sc.payload.mass = mass;
-        sc.payload.length = length;
-        sc.validate().map_err(|e| format!("twin payload: {e}"))?;
-        let trace = Simulator::run(sc).map_err(|e| format!("twin flight: {e}"))?;
-        let t = trace.column("t").ok_or("twin flight has no time column")?;
-        let column = |name: &str| {
-            trace
-                .column(name)
-                .ok_or_else(|| format!("twin flight has no column {name}"))
-        };
-        let states = template
-            .states
-            .iter()
-            .map(|s| column(s))
-            .collect::<Result<Vec<_>, _>>()?;
-        let inputs = template
-            .inputs
-            .iter()
-            .map(|s| column(s))
-            .collect::<Result<Vec<_>, _>>()?;
-        let dt = template.dt;
-        let (x, n) = resample(t, &states, dt);
-        let (u, m) = resample(t, &inputs, dt);
-        let traj =
-            Trajectory::new(&x, states.len(), &u, inputs.len()).map_err(|e| e.to_string())?;
-        debug_assert_eq!(n, m);
-        if !self.search {
-            let full = template.n() * template.delays + template.m();
-            let rank = (template.rank != 0 && template.rank < full).then_some(template.rank);
-            let model = dmdc::fit(
-                &traj,
-                &DmdcSettings {
-                    delays: template.delays,
-                    rank,
-                    offset: template.offset,
-                    dt,
-                },
-            )
-            .map_err(|e| e.to_string())?;
-            return named(model, &template.states, &template.inputs).map_err(|e| e.to_string());
-        }
-        // As the oracle is identified (search, then the control-relevant selection against
-        // the white-box of the flight), but at the template's q: the delay stack the
-        // flying controller hands over keeps its size.
-        let settings = IdentifySettings {
-            dt,
-            offset: template.offset,
-            search: true,
-            search_delays: Some(vec![template.delays]),
-            fine: Some([0, 7]),
-            test_span: self.scenario.duration * TEST_FRACTION,
-            cable_length: Some(length),
-            vehicle_mass: self.vehicle_mass,
-            ..IdentifySettings::default()
-        };
-        let (train, test) = split(&traj, &settings).map_err(|e| e.to_string())?;
-        let found = search(&train, &test, &settings).map_err(|e| e.to_string())?;
-        let plant = whitebox_model(&train, &template.states, &template.inputs, &settings, mass)
-            .map_err(|e| e.to_string())?;
-        let selection = select_for_control(
-            &train,
-            &test,
-            &template.states,
-            &template.inputs,
-            &settings,
-            &found,
-            &plant,
-            mpc,
-            &SelectionSettings {
-                plant_label: format!("twin whitebox (payload {mass:.3} kg on {length:.2} m)"),
-                ..SelectionSettings::default()
-            },
-            None,
-        )
-        .map_err(|e| e.to_string())?;
-        if !selection.passed {
-            return Err(format!(
-                "no rank at q = {} passed the closed-loop check on the twin's white-box",
-                template.delays
-            ));
-        }
-        Ok(selection.model)
-    }
-}
 
 /// Length of a twin step flight [s] and the time of its step [s] (as the linear check's).
 pub const TWIN_CHECK_SECONDS: f64 = 20.0;
@@ -446,7 +275,7 @@ impl TwinPlant {
         model: &LinearModel,
         settings: &MpcSettings,
     ) -> Result<Option<Simulator>, ControlError> {
-        use super::SwingController;
+        use crate::control::SwingController;
         let mpc = MpcController::new(model, settings.clone())?;
         if mpc.axes() != self.axes {
             return Err(ControlError::Model(format!(
@@ -564,140 +393,13 @@ fn sim_error(e: SimError) -> ControlError {
     }
 }
 
-/// Linear interpolation of `cols` (sampled at the strictly increasing `t`) onto
-/// t0, t0 + dt, … ≤ t_end, time-major; also the sample count.
-fn resample(t: &[f64], cols: &[&[f64]], dt: f64) -> (Vec<f64>, usize) {
-    let span = t.last().copied().unwrap_or(0.0) - t.first().copied().unwrap_or(0.0);
-    let count = if t.len() < 2 {
-        0
-    } else {
-        (span / dt + 1e-9).floor() as usize + 1
-    };
-    let mut out = Vec::with_capacity(count * cols.len());
-    let mut j = 0;
-    for k in 0..count {
-        let tk = t[0] + dt * k as f64;
-        while j + 2 < t.len() && t[j + 1] < tk {
-            j += 1;
-        }
-        let (t0, t1) = (t[j], t[j + 1]);
-        let w = ((tk - t0) / (t1 - t0)).clamp(0.0, 1.0);
-        for c in cols {
-            out.push(c[j] + w * (c[j + 1] - c[j]));
-        }
-    }
-    (out, count)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::plant::GRAVITY;
-
-    #[test]
-    fn resample_is_exact_on_lines() {
-        let t: Vec<f64> = (0..50)
-            .map(|k| 0.01 * k as f64 + 0.003 * (k % 3) as f64)
-            .collect();
-        let c: Vec<f64> = t.iter().map(|t| 2.0 * t - 1.0).collect();
-        let (x, n) = resample(&t, &[&c], 0.03);
-        assert_eq!(n, ((t[49] - t[0]) / 0.03).floor() as usize + 1);
-        for (k, v) in x.iter().enumerate() {
-            let tk = t[0] + 0.03 * k as f64;
-            assert!((v - (2.0 * tk - 1.0)).abs() < 1e-12);
-        }
-    }
-
-    /// The first `seconds` of the flight `sc`: (vn, swing_n) and acc_sp_n at 0.03 s.
-    fn flight(sc: &Scenario, seconds: f64) -> (Vec<f64>, Vec<f64>) {
-        let mut sc = sc.clone();
-        sc.duration = seconds;
-        let trace = Simulator::run(sc).unwrap();
-        let t = trace.column("t").unwrap();
-        let col = |n: &str| trace.column(n).unwrap();
-        let (x, _) = resample(t, &[col("vn"), col("swing_n")], 0.03);
-        let (u, _) = resample(t, &[col("acc_sp_n")], 0.03);
-        (x, u)
-    }
-
-    /// The training flight's model as a template: DMDc q = 6 on 30 s of the built-in
-    /// training flight.
-    fn template(sc: &Scenario) -> LinearModel {
-        let (x, u) = flight(sc, 30.0);
-        let traj = Trajectory::new(&x, 2, &u, 1).unwrap();
-        let settings = DmdcSettings {
-            delays: 6,
-            rank: None,
-            offset: crate::sysid::Offset::Affine,
-            dt: 0.03,
-        };
-        let model = dmdc::fit(&traj, &settings).unwrap();
-        named(
-            model,
-            &["vn".into(), "swing_n".into()],
-            &["acc_sp_n".into()],
-        )
-        .unwrap()
-    }
-
-    /// Frequency [rad/s] of the least damped oscillatory mode of a model's A.
-    fn swing_frequency(m: &LinearModel) -> f64 {
-        m.a.complex_eigenvalues()
-            .iter()
-            .filter(|z| z.im > 1e-3)
-            .max_by(|a, b| a.norm().total_cmp(&b.norm()))
-            .map(|z| z.arg() / m.dt)
-            .unwrap()
-    }
-
-    #[test]
-    fn twin_models_swing_at_the_pendulum_frequency_of_the_length_asked() {
-        let sc = Scenario::builtin("training").unwrap();
-        let tpl = template(&sc);
-        let twin = Twin::new(&sc, 40.0, sc.vehicle.mass, false).unwrap();
-        for &l in &[0.5, 2.0] {
-            let m = twin
-                .identify(&tpl, 0.2, l, &MpcSettings::default())
-                .unwrap();
-            assert_eq!((m.delays, m.states.clone()), (6, tpl.states.clone()));
-            let w = swing_frequency(&m);
-            // Under velocity control the vehicle is neither pinned nor free: the swing
-            // lies between sqrt(g/l) and sqrt(g/l · (1 + m_p/m_v)), within 10 %.
-            let pinned = (GRAVITY / l).sqrt();
-            let free = (GRAVITY / l * (1.0 + 0.2 / sc.vehicle.mass)).sqrt();
-            assert!(
-                w > 0.9 * pinned && w < 1.1 * free,
-                "l {l}: {w} rad/s, pinned {pinned}, free {free}"
-            );
-        }
-    }
-
-    #[test]
-    fn refuses_short_flights_and_bad_masses() {
-        let sc = Scenario::builtin("training").unwrap();
-        assert!(Twin::new(&sc, 5.0, 1.0, false).is_err());
-        assert!(Twin::new(&sc, 60.0, -1.0, false).is_err());
-        let twin = Twin::new(&sc, 30.0, 0.952, false).unwrap();
-        let tpl = template(&sc);
-        let mpc = MpcSettings::default();
-        assert!(twin.identify(&tpl, -0.1, 1.0, &mpc).is_err());
-        let mut havok = tpl.clone();
-        havok.method = "havokc".into();
-        assert!(twin.identify(&havok, 0.2, 1.0, &mpc).is_err());
-    }
-
-    #[test]
-    fn twin_search_keeps_the_delays_and_passes_the_check() {
-        let sc = Scenario::builtin("training").unwrap();
-        let tpl = template(&sc);
-        let twin = Twin::new(&sc, 120.0, sc.vehicle.mass, true).unwrap();
-        let m = twin
-            .identify(&tpl, 0.3, 1.5, &MpcSettings::default())
-            .unwrap();
-        assert_eq!(m.delays, tpl.delays);
-        let check = &m.diagnostics.extra["control_check"];
-        assert_eq!(check["passed"], serde_json::json!(true), "{check}");
-    }
+    use crate::design::fixtures::{flight, template};
+    use crate::sysid::hankel::Trajectory;
+    use crate::sysid::pipeline::whitebox_model;
+    use crate::sysid::settings::IdentifySettings;
 
     /// The builtin training vehicle's twin: a small delay model of 60 s of its flight, the
     /// white-box of that flight (the true cable length) and the twin carrying it.
@@ -719,7 +421,7 @@ mod tests {
 
     #[test]
     fn the_twin_measures_how_much_of_px4_s_swing_the_mpc_removes() {
-        use crate::control::selection::TwinBounds;
+        use crate::design::selection::TwinBounds;
         let (tpl, _, twin) = builtin_twin();
         let bounds = TwinBounds::default();
         // PX4 alone leaves the payload ringing after the step ...
@@ -780,8 +482,8 @@ mod tests {
 
     #[test]
     fn the_twin_sees_the_attitude_loop_that_the_linear_check_does_not() {
-        use crate::control::check::{mpc_step_check, StepCheckSettings};
-        use crate::control::selection::{CheckBounds, TwinBounds};
+        use crate::design::check::{mpc_step_check, StepCheckSettings};
+        use crate::design::selection::{CheckBounds, TwinBounds};
         let (tpl, plant, twin) = builtin_twin();
         let mpc = MpcSettings::default();
         let (bounds, twin_bounds) = (CheckBounds::default(), TwinBounds::default());

@@ -1,6 +1,6 @@
 //! Simulation speed: simulated seconds per wall second of the full closed loop (vehicle +
 //! single payload + PX4 cascade + 100 Hz logging) at the 1 ms RK4 step, on one core.
-//! Budget (DESIGN §8): ≥ 1000× real time, stretch 5000×.
+//! Budget (docs/architecture.md, "Budgets"): ≥ 1000× real time, stretch 5000×.
 
 #![allow(clippy::needless_range_loop)]
 

@@ -1,4 +1,4 @@
-//! Identification budgets (DESIGN §8): one DMDc fit (q = 50, 120 s at 0.03 s, one axis)
+//! Identification budgets (docs/architecture.md, "Budgets"): one DMDc fit (q = 50, 120 s at 0.03 s, one axis)
 //! < 5 ms, and the 366-candidate reference grid (q = 2…60 step 2 × p = 5…(2q+1) step 5,
 //! 10 rollouts of 20 s) < 0.5 s, on one core.
 //!

@@ -1,0 +1,206 @@
+//! The re-synthesis of the adaptive MPC, off the tick path: the job handed over (the online
+//! factor, or a payload to fly the twin with), the candidate model and its MPC, the
+//! closed-loop check before a swap, and the channels of the worker thread.
+
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+
+use super::settings::{AdaptiveSettings, SynthesisMode};
+use crate::control::{ControlError, MpcController, MpcSettings};
+use crate::design::check::{step_check_with, StepCheck, StepCheckSettings};
+use crate::design::reidentify::Twin;
+use crate::sysid::online::model_from_factor;
+use crate::sysid::{LinearModel, Offset};
+
+/// The factor handed to the synthesis (a recycled buffer).
+pub(super) struct Job {
+    pub(super) factor: Vec<f64>,
+    pub(super) weight: f64,
+    /// Fly the twin with this payload (mass [kg], length [m]) instead of using the factor.
+    pub(super) twin: Option<[f64; 2]>,
+}
+
+/// A candidate that passed the check (boxed so that the swap moves pointers only).
+pub(super) struct Candidate {
+    pub(super) mpc: Box<MpcController>,
+    pub(super) model: Box<LinearModel>,
+}
+
+/// What a synthesis returns; `job` comes back for reuse.
+pub(super) struct Outcome {
+    pub(super) job: Box<Job>,
+    pub(super) result: Result<Candidate, String>,
+    pub(super) check: Option<StepCheck>,
+}
+
+/// Messages to the worker.
+pub(super) enum ToWorker {
+    Build(Box<Job>),
+    /// Replaced objects, dropped on the worker.
+    Retire(#[allow(dead_code)] Retired),
+}
+
+/// What a swap or a rejection leaves behind.
+pub(super) enum Retired {
+    Controller(
+        #[allow(dead_code)] Box<MpcController>,
+        #[allow(dead_code)] Box<LinearModel>,
+    ),
+    Reason(#[allow(dead_code)] String),
+}
+
+/// What the synthesis needs besides the factor: fixed for the controller's life.
+pub(super) struct Synthesizer {
+    pub(super) template: LinearModel,
+    pub(super) mpc: MpcSettings,
+    pub(super) settings: AdaptiveSettings,
+    pub(super) twin: Option<Twin>,
+}
+
+impl Synthesizer {
+    pub(super) fn run(&self, job: Box<Job>) -> Outcome {
+        let mut check = None;
+        let result = self.build(&job, &mut check);
+        Outcome { job, result, check }
+    }
+
+    fn build(&self, job: &Job, check_out: &mut Option<StepCheck>) -> Result<Candidate, String> {
+        let t = &self.template;
+        let full = t.m() + usize::from(t.offset == Offset::Affine) + t.n() * t.delays;
+        // Rank 0 marks a full-rank model.
+        let rank = if t.rank == 0 { full } else { t.rank.min(full) };
+        let model = match (job.twin, &self.twin) {
+            (Some([mass, length]), Some(twin)) => twin.identify(t, mass, length, &self.mpc)?,
+            (Some(_), None) => return Err("no twin to fly".into()),
+            (None, _) => {
+                model_from_factor(&job.factor, job.weight, rank, t).map_err(|e| e.to_string())?
+            }
+        };
+        let rho = model.spectral_radius().map_err(|e| e.to_string())?;
+        // NaN is refused too.
+        if rho.is_nan() || rho > self.settings.max_spectral_radius {
+            return Err(format!(
+                "spectral radius {rho:.4} above {}",
+                self.settings.max_spectral_radius
+            ));
+        }
+        if job.twin.is_some()
+            && self
+                .twin
+                .as_ref()
+                .is_some_and(|_| self.settings.twin.search)
+        {
+            // The twin's selection has flown this candidate's MPC against the white-box of
+            // the measured payload, with drag and input lag: a stronger check than the
+            // candidate on itself.
+            return Ok(Candidate {
+                mpc: Box::new(
+                    MpcController::new(&model, self.mpc.clone()).map_err(|e| e.to_string())?,
+                ),
+                model: Box::new(model),
+            });
+        }
+        // The refit's constant term is the operating point of the recent data (drag at
+        // cruise, a thrust offset). In the check (a plant started at rest) it would be a
+        // disturbance the hold phase measures instead of the dynamics, so the check flies an
+        // MPC designed on the model without it, on plants without it; the MPC swapped in is
+        // designed on the model as fitted.
+        let mut bare = model.clone();
+        bare.c.fill(0.0);
+        let mut plants = vec![bare.clone()];
+        if self.settings.check_drag > 0.0 {
+            plants.push(
+                bare.with_velocity_drag(self.settings.check_drag)
+                    .map_err(|e| e.to_string())?,
+            );
+        }
+        let mut checked = MpcController::new(&bare, self.mpc.clone()).map_err(|e| e.to_string())?;
+        let mut worst = StepCheck {
+            overshoot: f64::NEG_INFINITY,
+            final_error: f64::NEG_INFINITY,
+            hold_drift: f64::NEG_INFINITY,
+        };
+        for plant in &plants {
+            for &input_lag in &self.settings.input_lags {
+                let c = StepCheckSettings {
+                    step: self.settings.check_step,
+                    input_lag,
+                    ..StepCheckSettings::default()
+                };
+                let r =
+                    step_check_with(&mut checked, &bare, plant, &c).map_err(|e| e.to_string())?;
+                worst.overshoot = worst.overshoot.max(r.overshoot);
+                worst.final_error = worst.final_error.max(r.final_error);
+                worst.hold_drift = worst.hold_drift.max(r.hold_drift);
+            }
+        }
+        *check_out = Some(worst);
+        if !self.settings.bounds.admit(&worst) {
+            return Err(format!(
+                "closed-loop check failed: overshoot {:.3}, final error {:.3}, hold drift {:.3}",
+                worst.overshoot, worst.final_error, worst.hold_drift
+            ));
+        }
+        let mpc = if model.c.iter().all(|v| *v == 0.0) {
+            checked
+        } else {
+            MpcController::new(&model, self.mpc.clone()).map_err(|e| e.to_string())?
+        };
+        Ok(Candidate {
+            mpc: Box::new(mpc),
+            model: Box::new(model),
+        })
+    }
+}
+
+pub(super) enum Synthesis {
+    Thread {
+        tx: Option<SyncSender<ToWorker>>,
+        rx: Receiver<Outcome>,
+        handle: Option<JoinHandle<()>>,
+    },
+    Deferred {
+        pending: Option<Box<Job>>,
+        done: Option<Outcome>,
+    },
+}
+
+impl Synthesis {
+    /// The synthesis of `mode`: nothing to start for `deferred`; for `thread`, the worker
+    /// thread that runs `synth`'s jobs until the sending side is dropped.
+    pub(super) fn start(
+        mode: SynthesisMode,
+        synth: &Arc<Synthesizer>,
+    ) -> Result<Self, ControlError> {
+        Ok(match mode {
+            SynthesisMode::Deferred => Synthesis::Deferred {
+                pending: None,
+                done: None,
+            },
+            SynthesisMode::Thread => {
+                // Capacity 2: one build and one drop may be in flight at once.
+                let (tx, jobs) = sync_channel::<ToWorker>(2);
+                let (out, rx) = sync_channel::<Outcome>(1);
+                let synth = Arc::clone(synth);
+                let handle = std::thread::Builder::new()
+                    .name("swingrt-adaptive-synthesis".into())
+                    .spawn(move || {
+                        while let Ok(msg) = jobs.recv() {
+                            if let ToWorker::Build(job) = msg {
+                                if out.send(synth.run(job)).is_err() {
+                                    break;
+                                }
+                            }
+                        }
+                    })
+                    .map_err(|e| ControlError::Synthesis(format!("cannot start worker: {e}")))?;
+                Synthesis::Thread {
+                    tx: Some(tx),
+                    rx,
+                    handle: Some(handle),
+                }
+            }
+        })
+    }
+}
