@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from imu_mpc import estimator, train
 
-from swingrt.experiments.runner import simulate_controller
+from swingrt.experiments.controllers import simulate_controller
 from swingrt.metrics import step_metrics
 from swingrt.scenario import Scenario
 
