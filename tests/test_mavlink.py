@@ -261,6 +261,21 @@ def test_setpoint_type_masks_follow_px4():
         parse_setpoint(_sp(0b110111111111))
 
 
+def test_the_node_clips_at_the_mpcs_own_bound():
+    """The offboard clip is the MPC's acc_max (its settings, else the core's default), not a
+    second constant of the node's."""
+    from swingrt import _core
+    from swingrt.mavlink.offboard import command_bound
+
+    model = _core.pendulum_model(delays=4, axes=1)
+    default = _core.check_settings("mpc", None)["acc_max"]
+    assert command_bound(_core.Mpc(model)) == default
+    assert command_bound(_core.Mpc(model, {"acc_max": 2.5})) == 2.5
+    adaptive = _core.AdaptiveMpc(model, {"acc_max": 3.0}, {"synthesis": "deferred"})
+    assert command_bound(adaptive, {"acc_max": 3.0}) == 3.0
+    assert command_bound(object()) == default
+
+
 def test_watchdog_rules():
     from swingrt.mavlink.offboard import Telemetry, Watchdog
 
@@ -595,7 +610,9 @@ def test_fly_against_sitl_damps_swing_like_pure_simulation(tmp_path):
     train = tmp_path / "train.parquet"
     model = tmp_path / "model.json"
     for args in (
-        ["collect", "--duration", "240", "-o", str(train)],
+        # Both axes stepped: a two-axis model needs both inputs to vary (sysid refuses one
+        # whose East response would be fitted to rounding noise).
+        ["collect", "--duration", "240", "--axes", "ne", "-o", str(train)],
         ["identify", str(train), "--axes", "ne", "-o", str(model)],
     ):
         subprocess.run([sys.executable, "-m", "swingrt", *args], check=True, timeout=120)
