@@ -118,6 +118,7 @@ def fly_sample(
         simulate_controller,
         train_methods,
         training_scenario,
+        without_whitebox,
     )
     from swingrt.sim import _run
 
@@ -151,21 +152,25 @@ def fly_sample(
                 "p": int(model.rank),
                 "test_nmae": float(model.diagnostics.get("test_nmae", math.nan)),
                 "control_check_passed": None if cc is None else bool(cc.get("passed", True)),
-                "wb_payload_mass": lqr["m_p"],
-                "wb_length": lqr["l"],
+                "wb_payload_mass": None if lqr is None else lqr["m_p"],
+                "wb_length": None if lqr is None else lqr["l"],
             }
             if out is not None:
                 train.to_parquet(out / "training.parquet")
                 model.save(out / "model.json")
-                wb.save(out / "whitebox.json")
+                if wb is not None:
+                    wb.save(out / "whitebox.json")
         except BaseException as exc:  # PID still flies without a model
             if _fatal(exc):
                 raise
             ident_error = f"{type(exc).__name__}: {exc}"
     method_errors: dict[str, str] = {}
-    if not setup_error and not ident_error and lqr is not None:
+    if not setup_error and not ident_error:
+        # Without a white-box estimate the LQR and the methods trained on it do not fly;
+        # their rows say why and the rest fly as usual.
+        method_errors.update(without_whitebox(exp, model, lqr))
         for ctrl in spec.controllers:
-            if ctrl not in METHODS:
+            if ctrl not in METHODS or ctrl in method_errors:
                 continue
             try:
                 trained.update(train_methods(train, _only(exp, ctrl), model, lqr, train_sc))

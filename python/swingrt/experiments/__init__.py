@@ -17,7 +17,7 @@ step with every controller (:func:`simulate_controller`) and writes the report
 from __future__ import annotations
 
 from swingrt.experiments.controllers import simulate_controller
-from swingrt.experiments.identification import identify_case, train_methods
+from swingrt.experiments.identification import identify_case, train_methods, without_whitebox
 from swingrt.experiments.runner import run_experiment
 from swingrt.experiments.scenarios import cases, evaluation_scenario, training_scenario
 from swingrt.experiments.schema import Experiment, list_experiments, load_experiment
@@ -33,4 +33,5 @@ __all__ = [
     "simulate_controller",
     "train_methods",
     "training_scenario",
+    "without_whitebox",
 ]

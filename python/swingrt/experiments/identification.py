@@ -7,6 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from swingrt.errors import DataError, IdentificationError
 from swingrt.io.flight import Trace
 from swingrt.methods import METHODS
 from swingrt.methods import SECTIONS as METHOD_SECTIONS
@@ -18,14 +19,23 @@ if TYPE_CHECKING:
 
 def identify_case(
     train: Trace, exp: Experiment, plots: Path | None = None, twin: Scenario | None = None
-) -> tuple[Any, Any, dict[str, float]]:
+) -> tuple[Any, Any | None, dict[str, float] | None]:
     """DMDc (with search) for the MPC, white-box estimates for the LQR; with ``plots`` the
     search's error-vs-q plot (the Pareto elbow) is written there. ``twin`` (the training
-    flight's scenario) adds the twin step flight to the control-relevant selection."""
+    flight's scenario) adds the twin step flight to the control-relevant selection and
+    describes the vehicle: its mass is the white-box's ``vehicle_mass`` unless
+    ``[identify]`` gives one.
+
+    The data-driven model never waits on the white-box: when the white-box cannot be
+    estimated (a payload mass that comes out non-positive, no swing peak), the white-box
+    and the LQR parameters are ``None`` and the model's ``diagnostics['whitebox_skipped']``
+    says why."""
     from swingrt.reports import plot_pareto
     from swingrt.sysid import identify, search, select_for_control
 
-    opts = {"method": "dmdc", **exp.identify}
+    described = _vehicle_mass(twin)
+    vehicle = {} if described is None else {"vehicle_mass": described}
+    opts = {"method": "dmdc", **vehicle, **exp.identify}
     if opts.pop("search", True) and "delays" not in opts:
         result = search(train, axes=exp.axes, **opts)
         if "mpc" in exp.controllers and result.settings["select"] == "control":
@@ -37,7 +47,14 @@ def identify_case(
             plot_pareto(result, plots)
     else:
         model = identify(train, axes=exp.axes, **opts)
-    wb = identify(train, method="whitebox", axes=exp.axes)
+    wb_opts = {k: exp.identify[k] for k in _WHITEBOX_KEYS if k in exp.identify}
+    try:
+        wb = identify(train, method="whitebox", axes=exp.axes, **{**vehicle, **wb_opts})
+    except (DataError, IdentificationError) as exc:
+        assumed = opts.get("vehicle_mass")
+        mass = "the default vehicle mass" if assumed is None else f"vehicle mass {assumed:g} kg"
+        why = f"white-box not estimated with {mass}: {exc}"
+        return model.with_diagnostics({"whitebox_skipped": why}), None, None
     est = wb.diagnostics["whitebox"]
     lqr = {
         "m_q": float(est["vehicle_mass"]),
@@ -48,8 +65,43 @@ def identify_case(
     return model, wb, lqr
 
 
+def without_whitebox(exp: Experiment, model: Any, lqr: dict[str, float] | None) -> dict[str, str]:
+    """The controllers of ``exp`` that cannot fly without the white-box estimate when there
+    is none (the LQR, and the methods trained on it), with the reason."""
+    if lqr is not None:
+        return {}
+    from swingrt.methods import METHODS, SECTIONS, needs_whitebox
+
+    why = str(model.diagnostics.get("whitebox_skipped", "no white-box estimate"))
+    sections = {s: getattr(exp, s) for s in SECTIONS}
+    adaptive_twin = bool((exp.adaptive or {}).get("twin", {}).get("enabled", False))
+    return {
+        c: why
+        for c in exp.controllers
+        if c == "lqr"
+        or (c == "mpc_adaptive" and adaptive_twin)
+        or (c in METHODS and needs_whitebox(c, sections))
+    }
+
+
+#: What ``[identify]`` may say of the vehicle and payload that the white-box uses too.
+_WHITEBOX_KEYS = ("vehicle_mass", "payload_mass", "cable_length")
+
+
+def _vehicle_mass(sc: Scenario | None) -> float | None:
+    """The vehicle mass [kg] a scenario describes, if any."""
+    if sc is None:
+        return None
+    mass = sc.to_dict().get("vehicle", {}).get("mass")
+    return None if mass is None else float(mass)
+
+
 def train_methods(
-    train: Trace, exp: Experiment, model: Any, lqr: dict[str, float], twin: Scenario | None
+    train: Trace,
+    exp: Experiment,
+    model: Any,
+    lqr: dict[str, float] | None,
+    twin: Scenario | None,
 ) -> dict[str, Any]:
     """What each controller of :mod:`swingrt.methods` in ``exp.controllers`` learns from
     the training flight (:func:`swingrt.methods.train`), by name."""

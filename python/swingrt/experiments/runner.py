@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from swingrt.experiments.controllers import simulate_controller
-from swingrt.experiments.identification import identify_case, train_methods
+from swingrt.experiments.identification import identify_case, train_methods, without_whitebox
 from swingrt.experiments.notes import adaptation_note, compare_mpc_lqr
 from swingrt.experiments.scenarios import (
     case_step,
@@ -62,10 +62,14 @@ def run_experiment(
         model, wb, lqr = identify_case(
             train, exp, out / f"{case}__error_vs_delays.png", twin=train_sc
         )
-        trained = train_methods(train, exp, model, lqr, train_sc)
+        skipped = without_whitebox(exp, model, lqr)
+        flown = [c for c in exp.controllers if c not in skipped]
+        trained = train_methods(train, _with_controllers(exp, flown), model, lqr, train_sc)
+        notes += [f"{case} {c}: not flown ({why})" for c, why in skipped.items()]
         train.to_parquet(out / f"{case}__training.parquet")
         model.save(out / f"{case}__model.json")
-        wb.save(out / f"{case}__whitebox.json")
+        if wb is not None:
+            wb.save(out / f"{case}__whitebox.json")
         ev_sc = evaluation_scenario(exp, over, seed + 1, train_sc, case=case)
         step = case_step(exp, case)
         oracle = None
@@ -76,7 +80,7 @@ def run_experiment(
             oracle.save(out / f"{case}__oracle_model.json")
         traces: dict[str, Trace] = {}
         prediction = None
-        for ctrl in exp.controllers:
+        for ctrl in flown:
             log(f"{exp.name} [{i}/{len(all_cases)}] {case}: {ctrl}")
             trace, extras = simulate_controller(
                 ev_sc,
@@ -128,7 +132,11 @@ def run_experiment(
             f"{case}: DMDc q = {model.delays}, p = {model.rank}, "
             f"test NMAE {float('nan') if test_nmae is None else test_nmae:.4f}"
             + (f" ({len(cc['checked'])} candidate(s) flown in the closed-loop check)" if cc else "")
-            + f"; white-box m_p = {lqr['m_p']:.3f} kg, l = {lqr['l']:.3f} m"
+            + (
+                f"; white-box m_p = {lqr['m_p']:.3f} kg, l = {lqr['l']:.3f} m"
+                if lqr is not None
+                else f"; {model.diagnostics['whitebox_skipped']}"
+            )
         )
         plot_case(out / f"{case}.png", case, traces, exp.axes)
         if prediction is not None and "mpc" in traces:
@@ -136,3 +144,12 @@ def run_experiment(
     write_metrics(out, exp, rows, notes)
     log(f"{exp.name}: wrote {out}")
     return rows
+
+
+def _with_controllers(exp: Experiment, controllers: list[str]) -> Experiment:
+    """``exp`` flying only ``controllers``."""
+    import copy
+
+    e = copy.copy(exp)
+    e.controllers = list(controllers)
+    return e

@@ -39,6 +39,7 @@ __all__ = [
     "Trained",
     "attach",
     "check_settings",
+    "needs_whitebox",
     "controller",
     "train",
 ]
@@ -48,6 +49,16 @@ METHODS = ("shaper", "shaper_zv", "payload_p", "deepc", "sindy_mpc", "nmpc", "ha
 #: Experiment settings sections of the methods.
 SECTIONS = ("shaper", "payload_p", "deepc", "nmpc", "sindy")
 _CORE_SECTIONS = ("shaper", "payload_p", "deepc")
+
+
+def needs_whitebox(name: str, sections: dict[str, dict[str, Any]] | None = None) -> bool:
+    """Whether method ``name``, set by ``sections``, is trained on the white-box estimate
+    (the payload-P law's cable length, the NMPC's pendulum, a shaper told to read it)."""
+    if name in ("payload_p", "nmpc"):
+        return True
+    if name in ("shaper", "shaper_zv"):
+        return check_settings("shaper", (sections or {}).get("shaper"))["source"] == "whitebox"
+    return False
 
 
 def check_settings(section: str, settings: dict[str, Any] | None) -> dict[str, Any]:
