@@ -290,15 +290,15 @@ def select_for_control(
     *,
     axes: str = "n",
     mpc_settings: Mapping[str, Any] | None = None,
-    candidates: int = 80,
-    input_lags: Sequence[float] = (0.0, 0.1),
-    vehicle_drag: Sequence[float] = (0.12, 0.4),
-    step: float = 2.0,
+    candidates: int | None = None,
+    input_lags: Sequence[float] | None = None,
+    vehicle_drag: Sequence[float] | None = None,
+    step: float | None = None,
     bounds: Mapping[str, float] | None = None,
     twin: _core.Scenario | None = None,
     twin_bounds: Mapping[str, float] | None = None,
-    noise_retry: float = 3.0,
-    noise_retry_wander: float = 0.003,
+    noise_retry: float | None = None,
+    noise_retry_wander: float | None = None,
     **settings: Any,
 ) -> SearchResult:
     """Pick from a search the model to fly an MPC on (control-relevant selection, see
@@ -307,8 +307,10 @@ def select_for_control(
     screened in turn, fly
     the MPC (``mpc_settings``) on the white-box model of the same flight,
     with each of ``vehicle_drag`` [1/s] added and behind each of ``input_lags`` [s]: hover,
-    a ``step`` m/s step, hold; the first within ``bounds`` (fractions of the step:
-    ``overshoot``, ``final_error``, ``hold_drift``) is taken, else the least violating. The
+    a ``step`` m/s step, hold (unset settings take the core's defaults: 80 candidates, lags
+    0 and 0.1 s, drags 0.12 and 0.4 /s, a 2 m/s step); the first within ``bounds``
+    (fractions of the step: ``overshoot``, ``final_error``, ``hold_drift``) is taken, else
+    the least violating. The
     outcome is in ``model.diagnostics['control_check']``. ``settings`` override the
     search's identification settings.
 
@@ -333,17 +335,18 @@ def select_for_control(
         raise ConfigError("result: not from a search (no candidates to check)", field="result")
     s = identify_settings(**{**result.settings, **settings})
     plant, label = check_plant(data, result, axes=axes, settings=s)
-    selection = {
+    # Unset selection settings take the core's defaults (``SelectionSettings``): one home.
+    given = {
         "candidates": candidates,
-        "input_lags": list(input_lags),
-        "vehicle_drag": list(vehicle_drag),
+        "input_lags": None if input_lags is None else list(input_lags),
+        "vehicle_drag": None if vehicle_drag is None else list(vehicle_drag),
         "step": step,
-        "bounds": dict(bounds or {}),
-        "twin_bounds": dict(twin_bounds or {}),
+        "bounds": None if bounds is None else dict(bounds),
+        "twin_bounds": None if twin_bounds is None else dict(twin_bounds),
         "noise_retry": noise_retry,
         "noise_retry_wander": noise_retry_wander,
-        "plant_label": label,
     }
+    selection = {k: v for k, v in given.items() if v is not None} | {"plant_label": label}
     if plant.method != "whitebox":
         twin = None
     x, u, states, inputs = _prepare(data, axes, s)

@@ -43,7 +43,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "--hold", choices=("loiter", "posctl"), default="loiter", help="mode to hand back to"
     )
     p.add_argument(
-        "--acc-limit", type=float, default=5.0, help="clip |a| per axis, m/s^2 (default 5)"
+        "--acc-limit",
+        type=float,
+        help="clip |a| per axis, m/s^2 (default: the MPC's own acc_max)",
     )
     p.add_argument(
         "--budget", type=float, metavar="MS", help="compute budget per tick (default Ts/2)"
@@ -74,7 +76,7 @@ def run(args) -> int:
 
     # Finite too: an infinite stale factor, budget or acceleration limit switches a safety
     # net off, and an infinite --timeout waits for ever on a silent link.
-    if not (0 < args.acc_limit < math.inf):
+    if args.acc_limit is not None and not (0 < args.acc_limit < math.inf):
         raise ConfigError(f"--acc-limit must be a positive number, not {args.acc_limit}")
     if args.budget is not None and not (0 < args.budget < math.inf):
         raise ConfigError(f"--budget must be a positive number of ms, not {args.budget}")

@@ -56,8 +56,13 @@ def run_on_px4(
     training: float = 300.0,
     scenario=None,
     quiet: bool = False,
+    twin: bool = True,
 ) -> list[dict[str, Any]]:
-    """Run the whole comparison on PX4 (module doc); returns the metrics rows."""
+    """Run the whole comparison on PX4 (module doc); returns the metrics rows. With
+    ``twin`` the model selection flies each candidate first on the vehicle PX4's
+    parameters describe, read from its own ULog (:func:`~swingrt.hil.params.vehicle_from_px4`,
+    the mass it hovers at ``MPC_THR_HOVER``): what swingrt knows of a vehicle it has only
+    the log of."""
     from swingrt import sysid
     from swingrt.experiments.schema import Experiment
     from swingrt.hil.session import HilSession
@@ -105,7 +110,18 @@ def run_on_px4(
     data = load_flight(ulog)
     data.to_parquet(out / f"{case}__training.parquet")
     result = sysid.search(data)
-    result = sysid.select_for_control(data, result)
+    twin_sc = None
+    if twin:
+        from swingrt.hil.params import vehicle_from_px4
+        from swingrt.io.px4_params import read_px4_parameters
+
+        twin_sc, twin_notes = vehicle_from_px4(read_px4_parameters(ulog))
+        summaries.append(
+            "twin of the model selection: the vehicle of PX4's parameters in its ULog ("
+            + "; ".join(twin_notes)
+            + ")"
+        )
+    result = sysid.select_for_control(data, result, twin=twin_sc)
     model = result.model
     model.save(out / f"{case}__model.json")
     plot_pareto(result, out / f"{case}__error_vs_delays.png")
@@ -141,7 +157,6 @@ def run_on_px4(
                 ts=ts,
                 axes=axes,
                 mission=mission,
-                acc_limit=5.0,
                 log_path=path,
                 watchdog=Watchdog(ts, swing_limit=math.radians(30.0)),
             )

@@ -12,7 +12,7 @@ Sequence (PX4 offboard rules, docs.px4.io "Offboard Mode"):
 3. at every tick k (absolute deadline t0 + k Ts; no drift, missed deadlines are skipped and
    counted): read the newest telemetry, build the controller state per axis
    ``[v, swing, swing_rate]`` (swing rate by backward difference over Ts, as the MPC's model
-   uses, thesis 5.4), ``a = controller.step(state, vel_ref)``, clip to ``acc_limit``, send
+   uses, thesis 5.4), ``a = controller.step(state, vel_ref)``, clip to the MPC's own bound, send
    SET_POSITION_TARGET_LOCAL_NED with :data:`MASK_ACC_ALT_HOLD` (North/East acceleration,
    altitude by position z, yaw held);
 4. at the end of the mission: switch to the hold mode (AUTO.LOITER by default) while still
@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from swingrt._core import AdaptiveMpc, Mpc
+from swingrt._core import AdaptiveMpc, Mpc, check_settings
 from swingrt.errors import (
     ConfigError,
     ControlError,
@@ -706,6 +706,19 @@ def load_controller(model_path, settings=None, *, adapt: bool = False, adaptive=
 EAST_HOLD_GAIN = 1.0
 
 
+def command_bound(controller, settings=None) -> float:
+    """The node's clip on |a| per axis [m/s²]: the MPC's own ``acc_max``, read from the
+    controller (``Mpc.settings()``) or from the MPC ``settings`` it was built with, so the
+    node neither cuts what the MPC planned within its bound nor passes more. A controller
+    without a bound of its own (the LQR) gets the MPC's default."""
+    read = getattr(controller, "settings", None)
+    own = read() if callable(read) else check_settings("mpc", settings)
+    bound = own.get("acc_max")
+    if bound is None:
+        bound = check_settings("mpc", None)["acc_max"]
+    return float(bound)
+
+
 def fly(
     conn,
     controller,
@@ -713,18 +726,20 @@ def fly(
     ts: float,
     axes: int = 2,
     mission: Mission | None = None,
-    acc_limit: float = 5.0,
+    acc_limit: float | None = None,
     log_path=None,
     **session_options,
 ) -> FlightReport:
     """Fly ``mission`` with ``controller`` (any object with ``step``/``reset``) over ``conn``.
 
+    ``acc_limit`` [m/s²] clips the command per axis (default: :func:`command_bound`).
     With one axis the controller flies North and East is held by a velocity P law
     (a_e = -:data:`EAST_HOLD_GAIN` ve), since PX4 needs North and East setpoints of the same kind.
     Raises :class:`FlightAbort` (after handing back) when a watchdog fires; the trace and
     timing are written to ``log_path`` in any case.
     """
     mission = mission or Mission.default()
+    limit = command_bound(controller) if acc_limit is None else float(acc_limit)
     if axes not in (1, 2):
         raise ConfigError(f"axes must be 1 or 2, not {axes}")
     session = OffboardSession(conn, ts=ts, **session_options)
@@ -750,12 +765,8 @@ def fly(
         a = np.asarray(controller.step(state, ref), dtype=float).reshape(-1)
         if a.shape != (axes,) or not np.all(np.isfinite(a)):
             raise ControlError(f"controller returned {a!r}, expected {axes} finite values")
-        an = float(np.clip(a[0], -acc_limit, acc_limit))
-        ae = (
-            float(np.clip(a[1], -acc_limit, acc_limit))
-            if axes == 2
-            else -EAST_HOLD_GAIN * tel.vel[1]
-        )
+        an = float(np.clip(a[0], -limit, limit))
+        ae = float(np.clip(a[1], -limit, limit)) if axes == 2 else -EAST_HOLD_GAIN * tel.vel[1]
         return (
             MASK_ACC_ALT_HOLD,
             (0.0, 0.0, session.alt_hold),
