@@ -73,6 +73,26 @@ def test_training_log_is_px4s_own_with_the_swing_sensor(report):
     assert not log["vehicle_status"]["failsafe"][: after + 1].any()
 
 
+def test_vehicle_read_from_px4s_own_log_is_the_one_flown(report):
+    """``swingrt vehicle`` on PX4's ULog: PX4 logged the allocation, gains and hover thrust
+    ``swingrt hil`` gave it, and the scenario read back is the vehicle flown."""
+    from swingrt._core import Scenario
+    from swingrt.hil.params import PX4_CONTROLLER, px4_parameters, vehicle_from_px4
+    from swingrt.io.px4_params import read_px4_parameters
+
+    out, _ = report
+    logged = read_px4_parameters(out / "px4_training.ulg")
+    flown = Scenario.builtin("hover")
+    given = px4_parameters(flown)
+    for k in [k for k in given if k.startswith("CA_ROTOR") or k in PX4_CONTROLLER]:
+        assert logged[k] == pytest.approx(given[k], rel=1e-6, abs=1e-7), k
+    sc, _ = vehicle_from_px4(logged, mass=M_VEHICLE + M_PAYLOAD)
+    v, w = sc.to_dict()["vehicle"], flown.to_dict()["vehicle"]
+    for f in ("arm", "yaw_arm"):
+        assert v[f] == pytest.approx(w[f], rel=1e-5), f
+    assert v["thrust_poly"] == pytest.approx(w["thrust_poly"], rel=2e-3)
+
+
 def test_pid_swings_as_physics_says(report):
     out, rows = report
     pid = Trace.from_parquet(out / "default-step__pid.parquet")

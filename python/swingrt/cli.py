@@ -25,6 +25,7 @@ COMMANDS = (
     "campaign",
     "sitl",
     "hil",
+    "vehicle",
     "fly",
     "mission",
     "bench",

@@ -50,7 +50,10 @@ def add_parser(sub) -> argparse.ArgumentParser:
         help="white-box payload mass (default: RLS on the log's thrust column)",
     )
     p.add_argument(
-        "--vehicle-mass", type=float, metavar="KG", help="white-box vehicle mass (default 0.952)"
+        "--vehicle-mass",
+        type=float,
+        metavar="KG",
+        help="white-box vehicle mass (default: the --twin scenario's, else the built-in 0.952)",
     )
     p.add_argument(
         "--cable-length",
@@ -78,9 +81,12 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument(
         "--twin",
         metavar="SCENARIO",
+        default="builtin",
         help="with --select control: also fly each candidate's MPC on swingrt's simulator of "
-        "this vehicle (a scenario TOML: airframe and PX4 gains; 'builtin' for the built-in "
-        "vehicle) carrying the white-box payload, and take only models that settle there",
+        "this vehicle (a scenario TOML: airframe and PX4 gains, e.g. from swingrt vehicle) "
+        "carrying the white-box payload, and take only models that settle there; default "
+        "'builtin', the built-in vehicle (what a twin adds is PX4's cascade and its lag "
+        "more than the exact airframe); 'none' flies no twin",
     )
     p.add_argument(
         "--sweep",
@@ -113,13 +119,16 @@ def run(args) -> int:
         vehicle_mass=args.vehicle_mass,
         cable_length=args.cable_length,
     )
-    with options_named():
-        checked = sysid.identify_settings(**settings)
     twin = None
-    if args.twin is not None:  # read before the search: a bad file fails at once
+    if args.twin != "none":  # read before the search: a bad file fails at once
         from swingrt.scenario import resolve
 
         twin = resolve(None if args.twin == "builtin" else args.twin, default="step")
+        if args.twin != "builtin" and settings["vehicle_mass"] is None:
+            # The vehicle's description weighs it for the white-box.
+            settings["vehicle_mass"] = float(twin.to_dict()["vehicle"]["mass"])
+    with options_named():
+        checked = sysid.identify_settings(**settings)
     data = load_flight(args.data, ulog_swing=_ulog_swing(args))
     result = None
     if args.search:

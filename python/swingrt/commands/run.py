@@ -34,6 +34,12 @@ def add_parser(sub) -> argparse.ArgumentParser:
         help="how every flight measures the swing: a world-frame swing sensor (default), a "
         "cable-angle sensor on the airframe, or none (the IMU estimate)",
     )
+    p.add_argument(
+        "--no-twin",
+        action="store_true",
+        help="with --px4: select the model without flying it first on the vehicle PX4's "
+        "parameters describe (the twin, read from PX4's ULog)",
+    )
     p.add_argument("--instance", type=int, default=0, help="PX4 instance with --px4")
     p.add_argument(
         "--training",
@@ -69,6 +75,7 @@ def run(args) -> int:
             instance=args.instance,
             training=args.training,
             quiet=args.quiet,
+            twin=not args.no_twin,
         )
         print((Path(args.out) / "metrics.md").read_text(encoding="utf-8"))
         by = {r["controller"]: r for r in rows}
@@ -77,6 +84,13 @@ def run(args) -> int:
         print(f"MPC swing IAE above the momentum floor is {ratio:.3f}× PX4 PID's")
         print(f"report: {args.out}/ (metrics, figures, traces, model, PX4 ULogs)")
         return 0
+    if args.no_twin:
+        from swingrt.errors import ConfigError
+
+        raise ConfigError(
+            "--no-twin: applies with --px4 (on the built-in simulator the training flight's "
+            "vehicle is the twin)"
+        )
     exp = Experiment(
         name="default-step",
         description="Honeybee with 0.2 kg on 1 m: 2 m/s North velocity step at t = 2 s "

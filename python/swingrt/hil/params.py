@@ -14,8 +14,15 @@ from __future__ import annotations
 import math
 
 from swingrt._core import Scenario
+from swingrt.errors import ConfigError
 
-__all__ = ["px4_parameters", "SDLOG_PROFILE_WITH_DEBUG", "HIL_RATE_GAIN_SCALE"]
+__all__ = [
+    "HIL_RATE_GAIN_SCALE",
+    "PX4_CONTROLLER",
+    "SDLOG_PROFILE_WITH_DEBUG",
+    "px4_parameters",
+    "vehicle_from_px4",
+]
 
 #: Scale of the roll and pitch rate gains on PX4 in the loop. In lockstep PX4's rate loop runs
 #: at the 250 Hz sensor rate behind its gyro filter; with the Honeybee's small inertia the
@@ -79,3 +86,172 @@ def px4_parameters(scenario: Scenario, *, takeoff_altitude: float | None = None)
     if takeoff_altitude is not None:
         params["MIS_TAKEOFF_ALT"] = round(float(takeoff_altitude), 2)
     return params
+
+
+# ---------------------------------------------------------------------- PX4 -> scenario
+
+_AXES = ("ROLL", "PITCH", "YAW")
+
+#: PX4 parameter → (controller field, index or None, factor to the field's unit). The
+#: inverse of :func:`px4_parameters` for the gains and limits it writes, and the rest of
+#: the cascade PX4 has a parameter for.
+PX4_CONTROLLER: dict[str, tuple[str, int | None, float]] = {
+    **{f"MC_{a}RATE_P": ("rate_p", i, 1.0) for i, a in enumerate(_AXES)},
+    **{f"MC_{a}RATE_I": ("rate_i", i, 1.0) for i, a in enumerate(_AXES)},
+    **{f"MC_{a}RATE_D": ("rate_d", i, 1.0) for i, a in enumerate(_AXES)},
+    **{f"MC_{a[0]}R_INT_LIM": ("rate_int_limit", i, 1.0) for i, a in enumerate(_AXES)},
+    **{f"MC_{a}RATE_MAX": ("rate_max", i, math.pi / 180.0) for i, a in enumerate(_AXES)},
+    **{f"MC_{a}_P": ("att_p", i, 1.0) for i, a in enumerate(_AXES)},
+    "IMU_DGYRO_CUTOFF": ("dgyro_cutoff", None, 1.0),
+    "MPC_XY_VEL_P_ACC": ("vel_p", 0, 1.0),
+    "MPC_Z_VEL_P_ACC": ("vel_p", 2, 1.0),
+    "MPC_XY_VEL_I_ACC": ("vel_i", 0, 1.0),
+    "MPC_Z_VEL_I_ACC": ("vel_i", 2, 1.0),
+    "MPC_XY_VEL_D_ACC": ("vel_d", 0, 1.0),
+    "MPC_Z_VEL_D_ACC": ("vel_d", 2, 1.0),
+    "MPC_VELD_LP": ("veld_cutoff", None, 1.0),
+    "MPC_XY_P": ("pos_p", 0, 1.0),
+    "MPC_Z_P": ("pos_p", 2, 1.0),
+    "MPC_XY_VEL_MAX": ("vel_max_xy", None, 1.0),
+    "MPC_Z_VEL_MAX_UP": ("vel_max_up", None, 1.0),
+    "MPC_Z_VEL_MAX_DN": ("vel_max_down", None, 1.0),
+    "MPC_TILTMAX_AIR": ("tilt_max", None, math.pi / 180.0),
+    "MPC_THR_MIN": ("thrust_min", None, 1.0),
+    "MPC_THR_MAX": ("thrust_max", None, 1.0),
+    "MPC_THR_XY_MARG": ("thrust_xy_margin", None, 1.0),
+}
+
+#: Spread of the rotors' |x| and |y|, as a fraction of the arm, beyond which the notes say
+#: that the frame was flown as a symmetric X.
+_X_TOLERANCE = 0.05
+
+
+def vehicle_from_px4(
+    params: dict[str, float], *, mass: float | None = None, base: Scenario | None = None
+) -> tuple[Scenario, list[str]]:
+    """The scenario of the vehicle PX4's ``params`` describe, and what it could not know.
+
+    Read: the rotor geometry of the control allocation (a quad X: arm and yaw moment arm,
+    in PX4's rotor order), the cascade's gains, rates and limits (:data:`PX4_CONTROLLER`;
+    the North/East velocity gains are PX4's one horizontal gain), and the hover thrust
+    ``MPC_THR_HOVER``: with ``mass`` [kg] given, the motors' thrust curve is the nominal one
+    scaled so that this mass hovers there; without, the mass is the one the nominal curve
+    hovers there (stated). Not in PX4's parameters and left nominal (``base``'s, the
+    built-in Honeybee by default), stated: the drag, the motor lag, the loop rates; the
+    inertia is the nominal one scaled with the mass and the arm squared."""
+    base = base or Scenario.builtin("step")
+    b = base.to_dict()
+    vehicle = dict(b["vehicle"])
+    controller = dict(b["controller"])
+    arm, yaw_arm, notes = _quad_x(params)
+    vehicle["arm"], vehicle["yaw_arm"] = arm, yaw_arm
+    read = []
+    for name, (field, index, factor) in PX4_CONTROLLER.items():
+        if name not in params:
+            continue
+        value = float(params[name]) * factor
+        if index is None:
+            controller[field] = value
+        else:
+            controller[field] = list(controller[field])
+            controller[field][index] = value
+            if field.startswith("vel") or field == "pos_p":
+                if index == 0:  # PX4 has one horizontal gain: North and East alike
+                    controller[field][1] = value
+        read.append(name)
+    missing = sorted(set(PX4_CONTROLLER) - set(read))
+    if missing:
+        notes.append(f"not in the parameters, nominal: {', '.join(missing)}")
+    hover = params.get("MPC_THR_HOVER")
+    if hover is None or not (0.0 < hover < 1.0):
+        raise ConfigError(
+            f"MPC_THR_HOVER must be in (0, 1), not {hover}: the hover thrust sets the motors",
+            field="MPC_THR_HOVER",
+        )
+    nominal = _mass_hovering_at(base, float(hover))
+    if mass is None:
+        vehicle["mass"] = nominal
+        notes.append(
+            f"mass {nominal:.3f} kg estimated: what the nominal motors hover at "
+            f"MPC_THR_HOVER {hover:g} (give --mass: the motors are then scaled to it)"
+        )
+    else:
+        if not (math.isfinite(mass) and mass > 0.0):
+            raise ConfigError(f"mass must be a positive number of kg, not {mass}", field="mass")
+        vehicle["mass"] = float(mass)
+        vehicle["thrust_poly"] = [c * mass / nominal for c in vehicle["thrust_poly"]]
+        notes.append(
+            f"motors: the nominal thrust curve x {mass / nominal:.3f}, so that {mass:g} kg "
+            f"hovers at MPC_THR_HOVER {hover:g}"
+        )
+    m0, d0 = float(b["vehicle"]["mass"]), float(b["vehicle"]["arm"])
+    scale = vehicle["mass"] / m0 * (arm / d0) ** 2
+    vehicle["inertia"] = [i * scale for i in b["vehicle"]["inertia"]]
+    notes.append(
+        f"inertia nominal x {scale:.3f} (mass x arm^2); drag, motor lag "
+        f"{vehicle['motor_tau'] * 1e3:.0f} ms and loop rates nominal: not in PX4's parameters"
+    )
+    sc = base.with_overrides({"vehicle": vehicle, "controller": controller})
+    return sc, notes
+
+
+def _quad_x(params: dict[str, float]) -> tuple[float, float, list[str]]:
+    """(arm [m], yaw moment arm [m], notes) of PX4's allocation, checked to be a quadrotor
+    in PX4's X rotor order (:data:`_ROTORS`). swingrt flies a symmetric X: rotors off the
+    diagonals or at unequal distances (a wide X such as the x500) are flown at their mean
+    distance, and the notes give the roll and pitch arms that were averaged."""
+    count = params.get("CA_ROTOR_COUNT")
+    if count != 4:
+        raise ConfigError(
+            f"swingrt simulates a quadrotor X; CA_ROTOR_COUNT is {count}", field="CA_ROTOR_COUNT"
+        )
+    xs, ys, moments = [], [], []
+    for i, (sx, sy, sk) in enumerate(_ROTORS):
+        try:
+            px, py, km = (float(params[f"CA_ROTOR{i}_{k}"]) for k in ("PX", "PY", "KM"))
+        except KeyError as exc:
+            raise ConfigError(f"rotor {i}: {exc.args[0]} missing", field=exc.args[0]) from None
+        if not (px * sx > 0 and py * sy > 0 and km * sk > 0):
+            raise ConfigError(
+                f"rotor {i} at ({px:g}, {py:g}) with KM {km:g} is not PX4's quad X order "
+                f"(expected signs {sx:+d}, {sy:+d}, {sk:+d})",
+                field=f"CA_ROTOR{i}_PX",
+            )
+        xs.append(abs(px))
+        ys.append(abs(py))
+        moments.append(abs(km))
+    arm = sum(math.hypot(x, y) for x, y in zip(xs, ys, strict=True)) / 4.0
+    pitch_arm, roll_arm = sum(xs) / 4.0, sum(ys) / 4.0
+    notes = []
+    spread = max(max(xs) - min(xs), max(ys) - min(ys), abs(pitch_arm - roll_arm))
+    if spread > _X_TOLERANCE * arm:
+        notes.append(
+            f"rotors not a symmetric X (roll arm {roll_arm:.3f} m, pitch arm "
+            f"{pitch_arm:.3f} m): flown as one with their mean distance {arm:.3f} m "
+            f"(roll and pitch arm {arm / math.sqrt(2.0):.3f} m)"
+        )
+    return arm, sum(moments) / 4.0, notes
+
+
+def _mass_hovering_at(base: Scenario, hover: float) -> float:
+    """The total mass [kg] ``base``'s motors hold at the normalised ``hover`` thrust:
+    bisection on the core's hover thrust (which grows with the mass) over the vehicle's
+    mass, plus the payload's that it carries."""
+    d = base.to_dict()["payload"]
+    payload = float(d["mass"]) + (float(d.get("mass2", 0.0)) if d["kind"] == "double" else 0.0)
+
+    def thrust(m: float) -> float:
+        try:
+            return base.with_overrides({"vehicle": {"mass": m}}).hover_thrust()
+        except ConfigError:  # more than the motors can lift with the core's margin
+            return math.inf
+
+    lo, hi = 1e-3, 1e3
+    if not (thrust(lo) < hover < thrust(hi)):
+        raise ConfigError(
+            f"MPC_THR_HOVER {hover:g} is outside what the motors can hover", field="MPC_THR_HOVER"
+        )
+    for _ in range(60):
+        mid = math.sqrt(lo * hi)
+        lo, hi = (mid, hi) if thrust(mid) < hover else (lo, mid)
+    return math.sqrt(lo * hi) + payload

@@ -1,0 +1,150 @@
+"""``swingrt vehicle``: a scenario from PX4's parameters, the inverse of the parameters
+``swingrt hil`` gives PX4 (the log PX4 itself writes is read in ``test_px4.py``)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from swingrt._core import Scenario
+from swingrt.errors import ConfigError, DataError
+from swingrt.hil.params import HIL_RATE_GAIN_SCALE, px4_parameters, vehicle_from_px4
+from swingrt.io.px4_params import read_px4_parameters
+
+#: A vehicle unlike the built-in one: wider, heavier, other gains.
+OTHER = {
+    "vehicle": {"arm": 0.25, "yaw_arm": 0.016, "mass": 1.4},
+    "controller": {"att_p": [5.5, 5.0, 2.5], "vel_p": [1.6, 1.6, 3.5], "tilt_max": 0.6},
+    "payload": {"mass": 0.3},
+}
+
+
+@pytest.mark.parametrize("overrides", [{}, OTHER])
+def test_the_scenario_comes_back_from_the_parameters_hil_gives_px4(overrides):
+    sc = Scenario.builtin("step").with_overrides(overrides)
+    d = sc.to_dict()
+    total = d["vehicle"]["mass"] + d["payload"]["mass"]
+    # MPC_THR_HOVER is the vehicle + payload's: given that mass, the motors come back.
+    back, notes = vehicle_from_px4(px4_parameters(sc), mass=total)
+    b = back.to_dict()
+    v, c, bv, bc = d["vehicle"], d["controller"], b["vehicle"], b["controller"]
+    assert bv["arm"] == pytest.approx(v["arm"], rel=1e-5)
+    assert bv["yaw_arm"] == pytest.approx(v["yaw_arm"], rel=1e-5)
+    assert bv["thrust_poly"] == pytest.approx(v["thrust_poly"], rel=2e-3)
+    for f in ("att_p", "vel_p", "vel_i", "pos_p"):
+        assert bc[f] == pytest.approx(c[f], rel=1e-9), f
+    assert bc["vel_d"][:2] == pytest.approx(c["vel_d"][:2])
+    assert bc["tilt_max"] == pytest.approx(c["tilt_max"], rel=1e-4)
+    for f in ("rate_p", "rate_i", "rate_d"):
+        # PX4 in the loop flies the roll and pitch rate gains scaled (hil.params).
+        want = [c[f][0] * HIL_RATE_GAIN_SCALE, c[f][1] * HIL_RATE_GAIN_SCALE, c[f][2]]
+        assert bc[f] == pytest.approx(want, rel=1e-4), f
+    assert any("not in PX4's parameters" in n for n in notes)
+
+
+def test_the_given_mass_hovers_at_px4s_hover_thrust():
+    params = px4_parameters(Scenario.builtin("step").with_overrides(OTHER))
+    for mass in (0.7, 2.0):
+        sc, _ = vehicle_from_px4(params, mass=mass)
+        payload = sc.to_dict()["payload"]["mass"]
+        # The vehicle alone (its mass less the payload it is carrying) hovers at the
+        # parameter: the motors were scaled to the mass given.
+        alone = sc.with_overrides({"vehicle": {"mass": mass - payload}})
+        assert alone.hover_thrust() == pytest.approx(params["MPC_THR_HOVER"], abs=1e-6)
+
+
+def test_without_a_mass_it_is_what_the_nominal_motors_hover_and_says_so():
+    sc = Scenario.builtin("step")
+    total = sc.to_dict()["vehicle"]["mass"] + sc.to_dict()["payload"]["mass"]
+    back, notes = vehicle_from_px4(px4_parameters(sc))
+    assert back.to_dict()["vehicle"]["mass"] == pytest.approx(total, rel=1e-3)
+    assert any("estimated" in n for n in notes)
+
+
+def _params(**changes):
+    p = px4_parameters(Scenario.builtin("step"))
+    p.update(changes)
+    return {k: v for k, v in p.items() if v is not None}
+
+
+@pytest.mark.parametrize(
+    "changes, field",
+    [
+        ({"CA_ROTOR_COUNT": 6}, "CA_ROTOR_COUNT"),
+        ({"CA_ROTOR0_PX": -0.1}, "CA_ROTOR0_PX"),
+        ({"CA_ROTOR2_KM": 0.02}, "CA_ROTOR2_PX"),
+        ({"CA_ROTOR3_KM": None}, "CA_ROTOR3_KM"),
+        ({"MPC_THR_HOVER": None}, "MPC_THR_HOVER"),
+        ({"MPC_THR_HOVER": 1.5}, "MPC_THR_HOVER"),
+    ],
+)
+def test_a_vehicle_swingrt_cannot_fly_is_refused_by_name(changes, field):
+    with pytest.raises(ConfigError) as e:
+        vehicle_from_px4(_params(**changes))
+    assert e.value.field == field
+
+
+def test_a_wide_x_is_flown_as_a_symmetric_one_and_says_so():
+    # PX4's x500 (its SITL airframe): rotors at (±0.13, ±0.22) and (∓0.13, ∓0.20) m.
+    geometry = {
+        "CA_ROTOR0_PX": 0.13, "CA_ROTOR0_PY": 0.22, "CA_ROTOR0_KM": 0.05,
+        "CA_ROTOR1_PX": -0.13, "CA_ROTOR1_PY": -0.20, "CA_ROTOR1_KM": 0.05,
+        "CA_ROTOR2_PX": 0.13, "CA_ROTOR2_PY": -0.22, "CA_ROTOR2_KM": -0.05,
+        "CA_ROTOR3_PX": -0.13, "CA_ROTOR3_PY": 0.20, "CA_ROTOR3_KM": -0.05,
+        "MPC_THR_HOVER": 0.60,
+    }  # fmt: skip
+    sc, notes = vehicle_from_px4(_params(**geometry), mass=2.0)
+    v = sc.to_dict()["vehicle"]
+    mean = (2 * math.hypot(0.13, 0.22) + 2 * math.hypot(0.13, 0.20)) / 4
+    assert v["arm"] == pytest.approx(mean) and v["yaw_arm"] == pytest.approx(0.05)
+    assert any("roll arm 0.210 m, pitch arm 0.130 m" in n for n in notes), notes
+    assert sc.with_overrides({"vehicle": {"mass": 2.0 - 0.2}}).hover_thrust() == pytest.approx(
+        0.60, abs=1e-6
+    )
+    _, notes = vehicle_from_px4(_params())
+    assert not any("symmetric X" in n for n in notes)
+
+
+def test_parameter_files(tmp_path):
+    qgc = tmp_path / "x.params"
+    qgc.write_text(
+        "# Onboard parameters for Vehicle 1\n#\n# Vehicle-Id Component-Id Name Value Type\n"
+        "1\t1\tMPC_THR_HOVER\t0.42\t9\n1\t1\tCA_ROTOR_COUNT\t4\t6\n"
+    )
+    assert read_px4_parameters(qgc) == {"MPC_THR_HOVER": 0.42, "CA_ROTOR_COUNT": 4.0}
+    plain = tmp_path / "x.txt"
+    plain.write_text("MPC_XY_P 0.95\nMC_ROLL_P, 6.5  # comment\n")
+    assert read_px4_parameters(plain) == {"MPC_XY_P": 0.95, "MC_ROLL_P": 6.5}
+    for text, what in [
+        ("MPC_XY_P\n", "expected 'NAME VALUE'"),
+        ("MPC_XY_P fast\n", "is not a number"),
+        ("# nothing\n", "no parameters"),
+    ]:
+        bad = tmp_path / "bad.params"
+        bad.write_text(text)
+        with pytest.raises(DataError, match=what):
+            read_px4_parameters(bad)
+    with pytest.raises(DataError, match="not a readable ULog"):
+        (tmp_path / "x.ulg").write_bytes(b"not a log")
+        read_px4_parameters(tmp_path / "x.ulg")
+
+
+def test_cli_writes_a_scenario_that_flies(cli, tmp_path):
+    src = tmp_path / "px4.params"
+    params = px4_parameters(Scenario.builtin("step").with_overrides(OTHER))
+    src.write_text("".join(f"1\t1\t{k}\t{v}\t9\n" for k, v in params.items()))
+    out = tmp_path / "v.toml"
+    r = cli("vehicle", src, "--mass", "1.7", "-o", out)
+    assert r.returncode == 0, r.stderr
+    sc = Scenario.from_toml(out.read_text())
+    assert sc.to_dict()["vehicle"]["mass"] == 1.7
+    assert math.isclose(sc.to_dict()["vehicle"]["arm"], 0.25, rel_tol=1e-5)
+    assert "nominal" in r.stderr and "nominal" in out.read_text()
+    r = cli("simulate", out, "--duration", "6", "-o", tmp_path / "t.parquet")
+    assert r.returncode == 0, r.stderr
+    for args in (["--mass", "-1"], ["-o", tmp_path / "v.json"]):
+        r = cli("vehicle", src, *args)
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    r = cli("vehicle", tmp_path / "missing.params")
+    assert r.returncode == 2 and "no such file" in r.stderr
