@@ -2,10 +2,10 @@
 
 Vehicle and node run as separate processes (this file doubles as their launcher: see
 ``__main__`` at the bottom) on random free ports of 127.0.0.1; every wait is bounded.
-Until the real simulator lands, the vehicle flies :class:`PointMassPendulum`, a test double
-(point mass with a first-order acceleration lag, linear pendulum, P/PI-like position and
-velocity loops) - clearly not the project's physics. The end-to-end damping test needs the
-real ``swingrt.Simulator`` and ``swingrt._core.Mpc`` and is skipped without them.
+The protocol tests fly :class:`PointMassPendulum`, a test double (point mass with a
+first-order acceleration lag, linear pendulum, P/PI-like position and velocity loops) that
+keeps them fast and independent of the physics; the end-to-end tests fly ``swingrt sitl``
+(swingrt's simulator under PX4's cascade) and ``swingrt fly`` with the core's MPC.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """System identification through the built extension.
 
 Synthetic tests use numpy-generated linear systems with closed-form answers; the
-acceptance tests on simulated flights run only when the simulator (``swingrt.collect``)
-is present.
+acceptance tests identify flights of swingrt's simulator (``swingrt.collect``) and predict
+other flights.
 """
 
 from __future__ import annotations
@@ -440,15 +440,9 @@ def test_cli_identify_and_evaluate(tmp_path, capsys):
 # ----------------------------------------------------------------- simulated flights
 
 
-def _need_sim():
-    if not hasattr(swingrt, "collect"):
-        pytest.skip("the simulator (swingrt.collect) is not available in this build")
-
-
 @pytest.mark.parametrize("mass", [0.1, 0.2, 0.3])
 @pytest.mark.parametrize("length", [0.5, 1.0, 2.0])
 def test_sim_models_predict_another_flight(mass, length):
-    _need_sim()
     cfg = {"payload": {"mass": mass, "length": length}}
     train = swingrt.collect(cfg, duration=200.0, seed=1)
     test = swingrt.collect(cfg, duration=100.0, seed=2)
@@ -458,7 +452,6 @@ def test_sim_models_predict_another_flight(mass, length):
 
 
 def test_sim_double_pendulum_dmdc_beats_whitebox():
-    _need_sim()
     cfg = {"payload": {"kind": "double", "mass": 0.2, "length": 1.0, "mass2": 0.1, "length2": 0.3}}
     train = swingrt.collect(cfg, duration=200.0, seed=3)
     test = swingrt.collect(cfg, duration=100.0, seed=4)
@@ -471,7 +464,6 @@ def test_sim_double_pendulum_dmdc_beats_whitebox():
 
 @pytest.mark.parametrize("mass, length", [(0.1, 0.5), (0.2, 1.0), (0.3, 2.0)])
 def test_sim_fft_length_on_free_swing(mass, length):
-    _need_sim()
     sp = {
         "t": 0.0,
         "pn": None,
@@ -516,7 +508,6 @@ def test_select_for_control_rejects_the_nmae_best_model_that_cannot_fly():
     winner (scored from sample 61), the NMAE-best (q, p) leaves the MPC creeping towards the
     setpoint with a slowly settling swing in flight; the closed-loop check rejects it and the
     model it selects tracks the step without offset on the full simulator."""
-    _need_sim()
     from swingrt.experiments import simulate_controller
     from swingrt.metrics import step_metrics
 
@@ -543,7 +534,6 @@ def test_select_for_control_rejects_the_nmae_best_model_that_cannot_fly():
 
 
 def test_select_for_control_bounds():
-    _need_sim()
     train, _ = _grid_case("mp0.2_l0.5")
     result = sysid.search(train)
     with pytest.raises(ConfigError, match="bound"):
@@ -562,7 +552,6 @@ def test_select_for_control_bounds():
 def _campaign_sample(index: int):
     """Sample ``index`` of the robustness campaign: its training flight, the training
     scenario (the vehicle's twin) and the evaluation scenario."""
-    _need_sim()
     import tomllib
 
     from swingrt.campaign.spec import parse_spec
