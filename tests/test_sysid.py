@@ -514,7 +514,7 @@ def test_select_for_control_rejects_the_nmae_best_model_that_cannot_fly():
     train, ev = _grid_case("mp0.3_l1")
     coarse = dict(search_delays=list(range(2, 59, 4)), dense_ranks=0, winners=1, fine=(2, 4))
     result = sysid.search(train, **coarse, score_delays=62)
-    picked = sysid.select_for_control(train, result)
+    picked = sysid.select_for_control(train, result, twin=None)
     cc = picked.model.diagnostics["control_check"]
     assert cc["passed"] and cc["checked"][-1]["passed"]
     assert cc["checked"][0]["delays"] == result.model.delays
@@ -541,7 +541,11 @@ def test_select_for_control_bounds():
     with pytest.raises(ConfigError, match="candidates"):
         sysid.select_for_control(train, result, candidates=0)
     # Bounds nothing can meet: the least-violating candidate, and the diagnostics say so.
-    none = sysid.select_for_control(train, result, candidates=3, bounds={"hold_drift": -1.0})
+    none = sysid.select_for_control(
+        train, result, candidates=3, bounds={"hold_drift": -1.0}, twin=None
+    )
+    with pytest.raises(ConfigError, match="twin"):
+        sysid.select_for_control(train, result, twin="x500")
     cc = none.model.diagnostics["control_check"]
     assert cc["passed"] is False and len(cc["checked"]) == 3
     assert any(

@@ -295,7 +295,7 @@ def select_for_control(
     vehicle_drag: Sequence[float] | None = None,
     step: float | None = None,
     bounds: Mapping[str, float] | None = None,
-    twin: _core.Scenario | None = None,
+    twin: _core.Scenario | str | None = "builtin",
     twin_bounds: Mapping[str, float] | None = None,
     noise_retry: float | None = None,
     noise_retry_wander: float | None = None,
@@ -315,7 +315,9 @@ def select_for_control(
     search's identification settings.
 
     With ``twin`` (a scenario of the vehicle: its airframe and PX4 gains, e.g. the training
-    flight's), each candidate's MPC first flies the step on swingrt's nonlinear simulator of
+    flight's or one from ``swingrt vehicle``; by default ``"builtin"``, the built-in vehicle,
+    whose worth as a twin is PX4's cascade and its lag more than its exact airframe; ``None``
+    flies no twin), each candidate's MPC first flies the step on swingrt's nonlinear simulator of
     that vehicle carrying the white-box payload (both links when the swing shows a second
     one, ``diagnostics['whitebox']['links']``), with the flight's swing-sensor noise, in still
     air, and must settle within ``twin_bounds`` (``settle`` [s] after the step,
@@ -347,6 +349,10 @@ def select_for_control(
         "noise_retry_wander": noise_retry_wander,
     }
     selection = {k: v for k, v in given.items() if v is not None} | {"plant_label": label}
+    if isinstance(twin, str):
+        if twin != "builtin":
+            raise ConfigError(f"twin: a Scenario, 'builtin' or None, not {twin!r}", field="twin")
+        twin = _core.Scenario.builtin("step")
     if plant.method != "whitebox":
         twin = None
     x, u, states, inputs = _prepare(data, axes, s)
