@@ -682,7 +682,8 @@ fn identify_inner(u: &mut Unstructured<'_>) -> AResult<()> {
         fine: opt(u, |u| {
             Ok([u.int_in_range(0usize..=1)?, u.int_in_range(0usize..=2)?])
         })?,
-        stability_tolerance: if u.ratio(7u8, 8u8)? { 1e-3 } else { float(u)? },
+        prediction_horizon: if u.ratio(7u8, 8u8)? { 3.0 } else { float(u)? },
+        growth_limit: if u.ratio(7u8, 8u8)? { 2.0 } else { float(u)? },
         payload_mass: opt(u, |u| positive(u, 0.3))?,
         cable_length: opt(u, |u| positive(u, 1.0))?,
         vehicle_mass: positive(u, 1.5)?,

@@ -244,10 +244,11 @@ def search(
     of the ``winners`` best q (``fine=None``: the coarse grid alone);
     ``search_mode="exhaustive"``: every q of ``delays`` (default 2...``score_delays`` = 80)
     and every p. Both score every candidate from the same rollout starts, so their NMAEs
-    compare. The stability screen (criterion in ``model.diagnostics['stability_screen']``)
-    bounds every eigenvalue by 1 + ``stability_tolerance`` except the velocity integrator's,
-    which may lie within 1 ± ``integrator_tolerance``. Other keywords are identification
-    settings (:func:`identify_settings`)."""
+    compare. The stability screen (criterion and, for a refused row, the reason in
+    ``diagnostics['stability_screen']``) judges a candidate by its use: no mode may grow by
+    more than ``growth_limit`` (2) over ``prediction_horizon`` (3 s, the MPC's horizon), except
+    the velocity integrator's, which may lie within 1 ± ``integrator_tolerance``. Other
+    keywords are identification settings (:func:`identify_settings`)."""
     if settings.get("method") == "whitebox":
         raise ConfigError("method: search applies to dmdc and havokc", field="method")
     grid = list(delays) if delays is not None else settings.get("search_delays")

@@ -173,7 +173,9 @@ def fly_sample(
             if ctrl not in METHODS or ctrl in method_errors:
                 continue
             try:
-                trained.update(train_methods(train, _only(exp, ctrl), model, lqr, train_sc))
+                trained.update(
+                    train_methods(train, exp.with_controllers([ctrl]), model, lqr, train_sc)
+                )
             except BaseException as exc:  # one method failing to train is its row's error
                 if _fatal(exc):
                     raise
@@ -230,15 +232,6 @@ def fly_sample(
 #: Seconds of training flight a controller's design read (PID: none); wall-clock times
 #: are kept out of the rows, which must not vary (``benches/methods.py`` measures them).
 DATA_COLUMNS = ("training_s",)
-
-
-def _only(exp: Any, ctrl: str) -> Any:
-    """The experiment with one controller (to train one method at a time)."""
-    import copy
-
-    e = copy.copy(exp)
-    e.controllers = [ctrl]
-    return e
 
 
 def _training_seconds(ctrl: str, trained: dict[str, Any], train: Any) -> float:

@@ -64,7 +64,7 @@ def run_experiment(
         )
         skipped = without_whitebox(exp, model, lqr)
         flown = [c for c in exp.controllers if c not in skipped]
-        trained = train_methods(train, _with_controllers(exp, flown), model, lqr, train_sc)
+        trained = train_methods(train, exp.with_controllers(flown), model, lqr, train_sc)
         notes += [f"{case} {c}: not flown ({why})" for c, why in skipped.items()]
         train.to_parquet(out / f"{case}__training.parquet")
         model.save(out / f"{case}__model.json")
@@ -144,12 +144,3 @@ def run_experiment(
     write_metrics(out, exp, rows, notes)
     log(f"{exp.name}: wrote {out}")
     return rows
-
-
-def _with_controllers(exp: Experiment, controllers: list[str]) -> Experiment:
-    """``exp`` flying only ``controllers``."""
-    import copy
-
-    e = copy.copy(exp)
-    e.controllers = list(controllers)
-    return e

@@ -4,7 +4,7 @@ or a TOML file, and the check of every settings section and scenario before anyt
 from __future__ import annotations
 
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from importlib.resources.abc import Traversable
 from pathlib import Path
@@ -120,6 +120,13 @@ class Experiment:
                 raise ConfigError(f"{source}: grid.{k}: must be a non-empty list")
         exp.check(source)
         return exp
+
+    def with_controllers(self, controllers: list[str]) -> Experiment:
+        """This experiment flying only ``controllers`` (a subset of its own, already checked)."""
+        unknown = [c for c in controllers if c not in self.controllers]
+        if unknown:
+            raise ConfigError(f"{self.name}: controllers: {unknown[0]!r} is not flown here")
+        return replace(self, controllers=list(controllers))
 
     def check(self, source: str) -> None:
         """Validate every settings section and every case's scenarios in the core, so a typo

@@ -38,6 +38,30 @@ SDLOG_PROFILE_WITH_DEBUG = 163
 # of each rotor's position (x forward, y right) and of its yaw moment (CCW rotors positive).
 _ROTORS = ((1, 1, 1), (-1, -1, 1), (1, -1, -1), (-1, 1, -1))
 
+_AXES = ("ROLL", "PITCH", "YAW")
+
+#: The cascade's parameters written for PX4 in the loop, through :data:`PX4_CONTROLLER`'s
+#: mapping; the rest of that table (rate limits, filter cut-offs, velocity limits, the xy
+#: thrust margin) is left at PX4's defaults, which are the built-in cascade's.
+_WRITTEN = (
+    *(f"MC_{a}RATE_{g}" for a in _AXES for g in "PID"),
+    *(f"MC_{a[0]}R_INT_LIM" for a in _AXES),
+    *(f"MC_{a}_P" for a in _AXES),
+    "MPC_XY_VEL_P_ACC",
+    "MPC_XY_VEL_I_ACC",
+    "MPC_XY_VEL_D_ACC",
+    "MPC_Z_VEL_P_ACC",
+    "MPC_Z_VEL_I_ACC",
+    "MPC_XY_P",
+    "MPC_Z_P",
+    "MPC_THR_MIN",
+    "MPC_THR_MAX",
+    "MPC_TILTMAX_AIR",
+)
+
+#: The roll and pitch rate gains, scaled by :data:`HIL_RATE_GAIN_SCALE` on PX4.
+_HIL_SCALED = frozenset(f"MC_{a}RATE_{g}" for a in _AXES[:2] for g in "PID")
+
 
 def px4_parameters(scenario: Scenario, *, takeoff_altitude: float | None = None) -> dict:
     """``{PX4 parameter name: value}`` for flying ``scenario``'s vehicle on PX4.
@@ -57,23 +81,12 @@ def px4_parameters(scenario: Scenario, *, takeoff_altitude: float | None = None)
         params[f"CA_ROTOR{i}_KM"] = round(sk * v["yaw_arm"], 6)
     params["THR_MDL_FAC"] = 0.0
     params["MPC_THR_HOVER"] = round(scenario.hover_thrust(), 4)
-    params["MPC_THR_MIN"] = c["thrust_min"]
-    params["MPC_THR_MAX"] = c["thrust_max"]
-    params["MPC_TILTMAX_AIR"] = round(math.degrees(c["tilt_max"]), 3)
-    for i, axis in enumerate(("ROLL", "PITCH", "YAW")):
-        scale = HIL_RATE_GAIN_SCALE if axis != "YAW" else 1.0
-        params[f"MC_{axis}RATE_P"] = round(c["rate_p"][i] * scale, 6)
-        params[f"MC_{axis}RATE_I"] = round(c["rate_i"][i] * scale, 6)
-        params[f"MC_{axis}RATE_D"] = round(c["rate_d"][i] * scale, 6)
-        params[f"MC_{axis[0]}R_INT_LIM"] = c["rate_int_limit"][i]
-        params[f"MC_{axis}_P"] = c["att_p"][i]
-    params["MPC_XY_VEL_P_ACC"] = c["vel_p"][0]
-    params["MPC_XY_VEL_I_ACC"] = c["vel_i"][0]
-    params["MPC_XY_VEL_D_ACC"] = c["vel_d"][0]
-    params["MPC_Z_VEL_P_ACC"] = c["vel_p"][2]
-    params["MPC_Z_VEL_I_ACC"] = c["vel_i"][2]
-    params["MPC_XY_P"] = c["pos_p"][0]
-    params["MPC_Z_P"] = c["pos_p"][2]
+    for name in _WRITTEN:
+        field, index, factor = PX4_CONTROLLER[name]
+        value = c[field] if index is None else c[field][index]
+        if name in _HIL_SCALED:
+            value *= HIL_RATE_GAIN_SCALE
+        params[name] = round(value / factor, 6)
     # Flight data: log the swing sensor (debug topics) from arming on.
     params["SDLOG_PROFILE"] = SDLOG_PROFILE_WITH_DEBUG
     # No RC and no ground station in the loop: neither loss is a failsafe; the offboard
@@ -90,11 +103,9 @@ def px4_parameters(scenario: Scenario, *, takeoff_altitude: float | None = None)
 
 # ---------------------------------------------------------------------- PX4 -> scenario
 
-_AXES = ("ROLL", "PITCH", "YAW")
-
-#: PX4 parameter → (controller field, index or None, factor to the field's unit). The
-#: inverse of :func:`px4_parameters` for the gains and limits it writes, and the rest of
-#: the cascade PX4 has a parameter for.
+#: PX4 parameter → (controller field, index or None, factor to the field's unit): the one
+#: mapping of the cascade both ways (:func:`px4_parameters` writes its ``_WRITTEN`` part
+#: through it, :func:`vehicle_from_px4` reads all of it).
 PX4_CONTROLLER: dict[str, tuple[str, int | None, float]] = {
     **{f"MC_{a}RATE_P": ("rate_p", i, 1.0) for i, a in enumerate(_AXES)},
     **{f"MC_{a}RATE_I": ("rate_i", i, 1.0) for i, a in enumerate(_AXES)},

@@ -6,9 +6,9 @@
 //! and one SVD per q for all p (see `dmdc`), adding modes incrementally as p grows; HAVOKc
 //! takes one SVD of Π per q. Candidates whose rollout diverges score ∞.
 //!
-//! Screening (`stability`): a candidate with an eigenvalue above 1 + `stability_tolerance`
-//! is unstable and never selected — except the velocity integrator's eigenvalue, judged on
-//! its own within 1 ± `integrator_tolerance`. Eigenvalues are costly next to a rollout, so
+//! Screening (`stability`): a candidate with a mode that grows by more than `growth_limit`
+//! over the prediction horizon is refused — except the velocity integrator's eigenvalue,
+//! judged on its own within 1 ± `integrator_tolerance`. Eigenvalues are costly next to a rollout, so
 //! per q the candidates are checked in ascending NMAE order until the first stable one: that
 //! gives the best stable p of every q (the error-vs-q curve, the Pareto elbow of figure 4.6)
 //! and hence the best stable candidate overall.
@@ -101,8 +101,10 @@ pub struct SearchSettings {
     pub horizon: usize,
     /// Number of rollout start points (10 in the thesis).
     pub starts: usize,
-    /// Spectral radius allowed above 1 for every eigenvalue but the integrator's.
-    pub stability_tolerance: f64,
+    /// Prediction horizon the model is used over [samples] (`stability`).
+    pub prediction_horizon: usize,
+    /// Largest growth of a mode over `prediction_horizon` (`stability`).
+    pub growth_limit: f64,
     /// Distance from 1 allowed to the velocity integrator's eigenvalue (`stability`).
     pub integrator_tolerance: f64,
     /// Indices of the velocity states in a block; `None` = the first half of the states.
@@ -119,7 +121,8 @@ impl Default for SearchSettings {
             dt: super::settings::DEFAULT_DT,
             horizon: 667,
             starts: 10,
-            stability_tolerance: 1e-3,
+            prediction_horizon: super::settings::default_prediction_samples(),
+            growth_limit: super::settings::DEFAULT_GROWTH_LIMIT,
             integrator_tolerance: super::settings::DEFAULT_INTEGRATOR_TOLERANCE,
             velocity_states: None,
             score_delays: super::settings::DEFAULT_SCORE_DELAYS,
@@ -143,7 +146,8 @@ impl SearchSettings {
             })
             .collect();
         Screen {
-            tolerance: self.stability_tolerance,
+            growth_limit: self.growth_limit,
+            horizon: self.prediction_horizon,
             integrator_tolerance: self.integrator_tolerance,
             states: n,
             velocity: self
@@ -388,11 +392,12 @@ fn search_plan(
     }
     let Some(bi) = best else {
         return Err(SysidError::Identification(format!(
-            "no stable candidate among {} (every model diverged or has an eigenvalue above {} \
-             besides the velocity integrator; raise stability_tolerance or \
-             integrator_tolerance to admit more)",
+            "no stable candidate among {} (every model diverged or has a mode growing more \
+             than {}× over the {}-sample prediction horizon besides the velocity integrator; \
+             raise growth_limit or integrator_tolerance to admit more)",
             table.len(),
-            1.0 + settings.stability_tolerance
+            settings.growth_limit,
+            settings.prediction_horizon
         )));
     };
     let c = &table[bi];

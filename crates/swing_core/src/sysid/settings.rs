@@ -20,6 +20,17 @@ pub const DEFAULT_DELAYS: usize = 20;
 pub const DEFAULT_SCORE_DELAYS: usize = 80;
 /// Distance from 1 allowed to the velocity integrator's eigenvalue (see `stability`).
 pub const DEFAULT_INTEGRATOR_TOLERANCE: f64 = 5e-3;
+/// Prediction horizon a model is used over [s]: the MPC's default horizon, which spans one
+/// swing period of the longest cable (≈ 3 s); the stability screen's time scale.
+pub const DEFAULT_PREDICTION_HORIZON: f64 = 3.0;
+/// Largest growth of any mode over the prediction horizon (`stability`): no mode's
+/// open-loop prediction more than doubles within the horizon.
+pub const DEFAULT_GROWTH_LIMIT: f64 = 2.0;
+
+/// `DEFAULT_PREDICTION_HORIZON` in samples of `DEFAULT_DT` (the MPC's default horizon).
+pub fn default_prediction_samples() -> usize {
+    (DEFAULT_PREDICTION_HORIZON / DEFAULT_DT).round() as usize
+}
 
 /// How a search walks the (q, p) plane.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -126,8 +137,12 @@ pub struct IdentifySettings {
     /// The default p radius 7 reaches a narrow optimum two rank steps (of 5) from the best
     /// stepped rank, which the benchmark's drag flight has.
     pub fine: Option<[usize; 2]>,
-    /// |λ| − 1 allowed to every eigenvalue of a candidate but the velocity integrator's.
-    pub stability_tolerance: f64,
+    /// Prediction horizon the model will be used over [s] (the stability screen's time
+    /// scale: set it to the MPC's horizon).
+    pub prediction_horizon: f64,
+    /// Largest factor by which any mode of a candidate may grow over `prediction_horizon`
+    /// (≥ 1; 1 = the unit circle); the velocity integrator is judged apart.
+    pub growth_limit: f64,
     /// |λ − 1| allowed to the velocity integrator's eigenvalue (see `sysid::stability`).
     pub integrator_tolerance: f64,
     /// White-box: payload mass [kg]; `None` = RLS on hover thrust (needs a thrust column).
@@ -165,7 +180,8 @@ impl Default for IdentifySettings {
             rank_start: 5,
             rank_step: 5,
             fine: Some([2, 7]),
-            stability_tolerance: 1e-3,
+            prediction_horizon: DEFAULT_PREDICTION_HORIZON,
+            growth_limit: DEFAULT_GROWTH_LIMIT,
             integrator_tolerance: DEFAULT_INTEGRATOR_TOLERANCE,
             payload_mass: None,
             cable_length: None,
@@ -234,7 +250,26 @@ impl IdentifySettings {
         if self.rank_step == 0 {
             return Err(ConfigError::new("rank_step", "must be at least 1"));
         }
-        non_negative("stability_tolerance", self.stability_tolerance)?;
+        positive("prediction_horizon", self.prediction_horizon)?;
+        if self.prediction_horizon < self.dt {
+            return Err(ConfigError::new(
+                "prediction_horizon",
+                format!(
+                    "must span at least one sample of dt = {} s (got {} s)",
+                    self.dt, self.prediction_horizon
+                ),
+            ));
+        }
+        finite("growth_limit", self.growth_limit)?;
+        if self.growth_limit < 1.0 {
+            return Err(ConfigError::new(
+                "growth_limit",
+                format!(
+                    "must be at least 1 (1 = the unit circle; got {})",
+                    self.growth_limit
+                ),
+            ));
+        }
         non_negative("integrator_tolerance", self.integrator_tolerance)?;
         if self.winners == 0 {
             return Err(ConfigError::new("winners", "must be at least 1"));
@@ -294,7 +329,8 @@ impl IdentifySettings {
             dt: self.dt,
             horizon: self.rollout_samples(),
             starts: self.starts,
-            stability_tolerance: self.stability_tolerance,
+            prediction_horizon: ((self.prediction_horizon / self.dt).round() as usize).max(1),
+            growth_limit: self.growth_limit,
             integrator_tolerance: self.integrator_tolerance,
             velocity_states: None,
             score_delays: self.score_delays,
@@ -351,6 +387,15 @@ mod tests {
         assert_eq!(e.field, "search");
         let e = IdentifySettings::from_json(r#"{"swing_band": [2.0, 1.0]}"#).unwrap_err();
         assert_eq!(e.field, "swing_band");
+        let e = IdentifySettings::from_json(r#"{"growth_limit": 0.5}"#).unwrap_err();
+        assert_eq!(e.field, "growth_limit");
+        let e = IdentifySettings::from_json(r#"{"prediction_horizon": 0.01}"#).unwrap_err();
+        assert_eq!(e.field, "prediction_horizon");
+        // The fixed tolerance the growth rule replaced is refused by name.
+        let e = IdentifySettings::from_json(r#"{"stability_tolerance": 1e-3}"#).unwrap_err();
+        assert!(e.to_string().contains("stability_tolerance"), "{e}");
+        let screen = IdentifySettings::default().search_settings().unwrap();
+        assert_eq!(screen.prediction_horizon, default_prediction_samples());
         // The seconds-named alias of the rollout length is read too.
         let s = IdentifySettings::from_json(r#"{"horizon": 3.0}"#).unwrap();
         assert_eq!(s.rollout_samples(), 100);

@@ -91,7 +91,9 @@ pub struct MpcSettings {
 impl Default for MpcSettings {
     fn default() -> Self {
         Self {
-            horizon: 100,
+            // One home with the identification's stability screen, which judges a model's
+            // growth over the horizon it will be used for.
+            horizon: crate::sysid::settings::default_prediction_samples(),
             control_horizon: 20,
             w_velocity: 1.0,
             // Tuned on the thesis's experiment matrix (payload grid, wind, double pendulum,
