@@ -42,7 +42,9 @@ _AXES = ("ROLL", "PITCH", "YAW")
 
 #: The cascade's parameters written for PX4 in the loop, through :data:`PX4_CONTROLLER`'s
 #: mapping; the rest of that table (rate limits, filter cut-offs, velocity limits, the xy
-#: thrust margin) is left at PX4's defaults, which are the built-in cascade's.
+#: thrust margin) is left at PX4's defaults, which are the built-in cascade's but for two
+#: that the horizontal step does not meet: IMU_DGYRO_CUTOFF (PX4 20 Hz, built-in 30) and
+#: MPC_Z_VEL_MAX_DN (PX4 1.5 m/s, built-in 1.0).
 _WRITTEN = (
     *(f"MC_{a}RATE_{g}" for a in _AXES for g in "PID"),
     *(f"MC_{a[0]}R_INT_LIM" for a in _AXES),
