@@ -11,6 +11,7 @@ __version__: str
 __all__ = [
     "AdaptiveMpc",
     "Controller",
+    "FINAL_SPAN",
     "FLIGHT_COLUMNS",
     "GRAVITY",
     "Guidance",
@@ -41,6 +42,7 @@ __all__ = [
     "select_for_control",
     "sim_real_time_factor",
     "step_overshoot",
+    "swing_iae",
     "swing_mode",
     "sysid_cable_length",
     "sysid_fft_peak",
@@ -50,6 +52,7 @@ __all__ = [
     "whitebox_payload_mass",
 ]
 GRAVITY: float
+FINAL_SPAN: float
 TRACE_COLUMNS: tuple[str, ...]
 FLIGHT_COLUMNS: tuple[str, ...]
 STATE_KEYS: tuple[str, ...]
@@ -80,6 +83,7 @@ class Scenario:
     @property
     def physics_dt(self) -> float: ...
     def hover_thrust(self) -> float: ...
+    def mass_hovering_at(self, hover: float) -> float: ...
     def schedule(self) -> Any: ...
     def __reduce__(self) -> tuple[Any, tuple[str]]: ...
 
@@ -422,6 +426,9 @@ def mpc_step_check(
     input_lags: list[float] = ...,
 ) -> list[dict[str, float]]: ...
 def step_overshoot(v: npt.NDArray[np.float64], v_before: float, v_after: float) -> float: ...
+def swing_iae(
+    t: npt.NDArray[np.float64], swing: npt.NDArray[np.float64], along: npt.NDArray[np.float64]
+) -> tuple[float, float]: ...
 def care(
     a: npt.NDArray[np.float64],
     b: npt.NDArray[np.float64],

@@ -23,8 +23,10 @@ the step direction), over the window after the step:
   norm of each tick's change) from ``t0`` to the end [m/s²]: command chatter, which the
   swing metrics do not see and the attitude loop and motors do.
 
-"final" is the mean over the last 2 s of the window. The swing is the true swing when the
-trace logs it (``swing_true_*``), else the measured one.
+"final" is the mean over the last 2 s of the window (the core's ``FINAL_SPAN``). The swing
+IAE and its floor are the core's ``swing_iae``, the definition the twin's check uses too.
+The swing is the true swing when the trace logs it (``swing_true_*``), else the measured
+one.
 
 :func:`swing_iae_floor` gives the part of the swing IAE that no controller can remove:
 horizontally the cable is all that accelerates the payload, so g·∫tan(swing) dt equals the
@@ -109,32 +111,30 @@ def step_metrics(
     vn, ve = _col(trace, "vn"), _col(trace, "ve")
     an, ae = _col(trace, "acc_sp_n"), _col(trace, "acc_sp_e")
     pre = t < t0
+    swing, along = _swing_along(trace, win, axis, sn, se)
     if axis == "ne":
         vsp_n, vsp_e = _col(trace, "vel_sp_n"), _col(trace, "vel_sp_e")
         after = np.array([np.nanmedian(vsp_n[win]), np.nanmedian(vsp_e[win])])
         norm = float(np.hypot(*after)) or 1.0
         d = after / norm
         v = vn * d[0] + ve * d[1]
-        swing = np.hypot(sn, se)
         vb = 0.0 if v_before is None else v_before
         va = norm if v_after is None else v_after
     else:
         v = vn if axis == "n" else ve
-        swing = sn if axis == "n" else se
         vsp = _col(trace, f"vel_sp_{axis}")
         vb = float(np.nanmedian(vsp[pre])) if v_before is None and pre.any() else (v_before or 0.0)
         va = float(np.nanmedian(vsp[win])) if v_after is None else v_after
     tw, vw, sw = t[win], v[win], swing[win]
     dt = float(np.median(np.diff(tw)))
-    tail = tw >= tw[-1] - 2.0
+    tail = tw >= tw[-1] - _core.FINAL_SPAN
     final_swing = float(np.mean(sw[tail]))
     step = va - vb
     overshoot = 100.0 * _core.step_overshoot(np.ascontiguousarray(vw, dtype=float), vb, va)
     a2 = an[win] ** 2 + ae[win] ** 2
     dev = np.degrees(sw - final_swing)
     late = tw >= t0 + RESIDUAL_AFTER_S
-    iae = float(np.sum(np.abs(dev)) * dt)
-    floor = swing_iae_floor(trace, t0=t0, axis=axis, t_end=t_end)
+    iae, floor = _core.swing_iae(tw, sw, along[win])
     return {
         "peak_swing_deg": float(np.degrees(np.max(np.abs(sw)))),
         "swing_settle_s": _settle(tw, np.degrees(sw - final_swing), 1.0, t0),
@@ -166,16 +166,19 @@ def swing_iae_floor(trace, *, t0: float, axis: str = "n", t_end: float | None = 
     """|∫(swing − final) dt| [deg·s] after the step at ``t0``, the swing along the step
     direction for ``ne``: the lower bound of ``swing_iae_deg_s`` (module docs)."""
     t, win, sn, se = _step_window(trace, t0, axis, t_end)
+    swing, along = _swing_along(trace, win, axis, sn, se)
+    return _core.swing_iae(t[win], swing[win], along[win])[1]
+
+
+def _swing_along(trace, win, axis: str, sn, se):
+    """The swing whose IAE is measured (its magnitude for ``ne``) and the swing along the
+    step, whose integral is the floor."""
     if axis == "ne":
         vsp = np.array([np.nanmedian(_col(trace, f"vel_sp_{a}")[win]) for a in "ne"])
         d = vsp / (float(np.hypot(*vsp)) or 1.0)
-        swing = sn * d[0] + se * d[1]
-    else:
-        swing = sn if axis == "n" else se
-    tw, sw = t[win], swing[win]
-    dt = float(np.median(np.diff(tw)))
-    final = float(np.mean(sw[tw >= tw[-1] - 2.0]))
-    return float(np.degrees(abs(np.sum(sw - final)) * dt))
+        return np.hypot(sn, se), sn * d[0] + se * d[1]
+    swing = sn if axis == "n" else se
+    return swing, swing
 
 
 def step_time(trace, axis: str = "n") -> float | None:

@@ -7,9 +7,10 @@ z_k = [x_k; x_{k-1}; ...; x_{k-q+1}] (newest first):
 
 * ``dmdc``    DMDc with delay coordinates (eq. 4.9-4.15), rank-p truncated SVD;
 * ``havokc``  HAVOKc (eq. 4.16-4.23) with the structural 0/1 entries forced (figure 4.4);
-* ``whitebox`` the linearised pendulum (eq. 5.7, stable sign) with the cable length from
-  the FFT peak of the swing (eq. 4.8, frequency in Hz) and the payload mass from RLS on hover
-  thrust (section 4.3.2).
+* ``whitebox`` the linearised pendulum (eq. 5.7, stable sign) with the cable length of the
+  single pendulum that answers the vehicle's motion as the swing does (the FFT peak of
+  eq. 4.8 when that fit fails; both in ``diagnostics['whitebox']``) and the payload mass
+  from RLS on hover thrust (section 4.3.2).
 
 Every rule of identification lives in the Rust core: the settings with their defaults and
 checks (``_core.identify_settings``: the keyword arguments below are its fields), the
@@ -270,8 +271,8 @@ def identify(data: Any, *, axes: str = "n", **settings: Any) -> LinearModel:
     20) and ``rank`` (default full). The first ``test_span`` seconds are held out and the
     model's ``diagnostics['test_nmae']`` is its rollout NMAE there; ``test_span=0`` trains
     on everything. White-box: ``payload_mass`` from RLS on the ``thrust`` column unless
-    given, ``cable_length`` from the swing FFT peak unless given. Every keyword is a field of
-    :func:`identify_settings`.
+    given, ``cable_length`` from the swing's answer to the vehicle's motion unless given.
+    Every keyword is a field of :func:`identify_settings`.
     """
     s = identify_settings(**settings)
     if s["search"]:
@@ -369,17 +370,17 @@ def check_plant(
 ) -> tuple[LinearModel, str]:
     """The plant the closed-loop check flies, and a label saying what it is.
 
-    The white-box of the same flight: cable length from the swing's FFT peak (or
-    ``cable_length``), payload mass from ``payload_mass`` if given, else RLS on a ``thrust``
-    column [N], else :data:`DEFAULT_CHECK_PAYLOAD_MASS` (not estimated; the label says so).
-    If no white-box can be built (no swing peak in the band …), the search's lowest-NMAE
+    The white-box of the same flight: cable length from the swing's answer to the vehicle's
+    motion (or ``cable_length``), payload mass from ``payload_mass`` if given, else RLS on a
+    ``thrust`` column [N], else :data:`DEFAULT_CHECK_PAYLOAD_MASS` (not estimated; the label
+    says so). If no white-box can be built (no swing peak in the band …), the search's lowest-NMAE
     model stands in as the plant (a model-only check; the label says why)."""
     s = settings
     cols = _columns(data)
     length = (
         f"cable length {s['cable_length']:.3g} m given"
         if s["cable_length"] is not None
-        else "cable length from the swing FFT"
+        else "cable length from the swing's answer to the vehicle's motion"
     )
     if s["payload_mass"] is not None:
         mass = float(s["payload_mass"])

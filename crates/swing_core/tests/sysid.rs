@@ -624,7 +624,8 @@ fn a_double_pendulum_is_found_with_its_links_and_a_single_one_is_not() {
     };
     for std in [0.0, 0.005] {
         let (v, th) = training(double.clone(), std);
-        let d = links::double_pendulum(&v, &th, 0.03, &links::LinkSettings::default())
+        let d = links::fit(&v, &th, 0.03, &links::LinkSettings::default())
+            .and_then(|fit| fit.double)
             .unwrap_or_else(|| panic!("no second link found at noise {std}"));
         assert!((d.length - 0.8).abs() < 0.08, "{d:?}");
         assert!((d.length2 - 0.6).abs() < 0.06, "{d:?}");
@@ -637,10 +638,17 @@ fn a_double_pendulum_is_found_with_its_links_and_a_single_one_is_not() {
             ..PayloadParams::default()
         };
         let (v, th) = training(single, 0.005);
-        let d = links::double_pendulum(&v, &th, 0.03, &links::LinkSettings::default());
+        let fit = links::fit(&v, &th, 0.03, &links::LinkSettings::default())
+            .unwrap_or_else(|| panic!("no pendulum fitted to {length} m"));
         assert!(
-            d.is_none(),
-            "a single pendulum of {length} m taken for {d:?}"
+            fit.double.is_none(),
+            "a single pendulum of {length} m taken for {:?}",
+            fit.double
+        );
+        assert!(
+            (fit.length - length).abs() < 0.03 * length,
+            "{length} m fitted as {} m",
+            fit.length
         );
     }
 }

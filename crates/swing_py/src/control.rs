@@ -545,6 +545,23 @@ fn step_overshoot(v: &Bound<'_, PyAny>, v_before: f64, v_after: f64) -> PyResult
     Ok(check::overshoot(v.as_slice()?, v_before, v_after))
 }
 
+/// The swing IAE after a step and its momentum floor [deg·s], as `(iae, floor)`: the one
+/// definition of the flight metrics and the twin (`swing_core::design::check::swing_iae`);
+/// `t` [s] from the step on, `swing` [rad] the swing (its magnitude for two axes), `along`
+/// [rad] the swing along the step.
+#[pyfunction]
+fn swing_iae(
+    t: &Bound<'_, PyAny>,
+    swing: &Bound<'_, PyAny>,
+    along: &Bound<'_, PyAny>,
+) -> PyResult<(f64, f64)> {
+    let t = convert::array1(t, "t")?;
+    let swing = convert::array1(swing, "swing")?;
+    let along = convert::array1(along, "along")?;
+    let r = check::swing_iae(t.as_slice()?, swing.as_slice()?, along.as_slice()?);
+    Ok((r.iae, r.floor))
+}
+
 /// Register this domain's functions and classes on the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyMpc>()?;
@@ -557,5 +574,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(pendulum_model, m)?)?;
     m.add_function(wrap_pyfunction!(mpc_step_check, m)?)?;
     m.add_function(wrap_pyfunction!(step_overshoot, m)?)?;
+    m.add_function(wrap_pyfunction!(swing_iae, m)?)?;
+    m.add("FINAL_SPAN", check::FINAL_SPAN)?;
     Ok(())
 }

@@ -131,6 +131,12 @@ impl PyScenario {
         self.inner.hover_thrust()
     }
 
+    /// Total mass [kg] this vehicle's motors hold at the normalised `hover` thrust (the
+    /// inverse of `hover_thrust`).
+    fn mass_hovering_at(&self, hover: f64) -> f64 {
+        swing_core::control::px4::Px4Cascade::mass_hovering_at(&self.inner.vehicle, hover)
+    }
+
     /// The setpoint schedule (explicit entries and seeded random steps) as dicts.
     fn schedule<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         crate::convert::to_py_object(py, &self.inner.schedule())

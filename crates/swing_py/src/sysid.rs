@@ -618,7 +618,6 @@ fn sysid_smooth_gaussian<'py>(
 
 /// Register this domain's functions and classes on the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add("GRAVITY", GRAVITY)?;
     m.add_class::<PyLinearModel>()?;
     m.add_class::<PySearch>()?;
     m.add_function(wrap_pyfunction!(check_settings, m)?)?;

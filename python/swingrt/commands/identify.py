@@ -59,7 +59,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--cable-length",
         type=float,
         metavar="M",
-        help="white-box cable length (default: from the swing's FFT peak)",
+        help="white-box cable length (default: from the swing's answer to the vehicle's motion)",
     )
     g = p.add_argument_group(
         "ULog swing sensor",

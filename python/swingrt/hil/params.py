@@ -247,24 +247,19 @@ def _quad_x(params: dict[str, float]) -> tuple[float, float, list[str]]:
 
 
 def _mass_hovering_at(base: Scenario, hover: float) -> float:
-    """The total mass [kg] ``base``'s motors hold at the normalised ``hover`` thrust:
-    bisection on the core's hover thrust (which grows with the mass) over the vehicle's
-    mass, plus the payload's that it carries."""
+    """The total mass [kg] ``base``'s motors hold at the normalised ``hover`` thrust (the
+    core's inverse of its hover thrust), refused when the vehicle left under the payload it
+    carries would not be one the motors can fly."""
     d = base.to_dict()["payload"]
     payload = float(d["mass"]) + (float(d.get("mass2", 0.0)) if d["kind"] == "double" else 0.0)
-
-    def thrust(m: float) -> float:
-        try:
-            return base.with_overrides({"vehicle": {"mass": m}}).hover_thrust()
-        except ConfigError:  # more than the motors can lift with the core's margin
-            return math.inf
-
-    lo, hi = 1e-3, 1e3
-    if not (thrust(lo) < hover < thrust(hi)):
+    total = base.mass_hovering_at(hover)
+    try:
+        if not total > payload:
+            raise ConfigError("no vehicle left under the payload")
+        base.with_overrides({"vehicle": {"mass": total - payload}})
+    except ConfigError as e:
         raise ConfigError(
-            f"MPC_THR_HOVER {hover:g} is outside what the motors can hover", field="MPC_THR_HOVER"
-        )
-    for _ in range(60):
-        mid = math.sqrt(lo * hi)
-        lo, hi = (mid, hi) if thrust(mid) < hover else (lo, mid)
-    return math.sqrt(lo * hi) + payload
+            f"MPC_THR_HOVER {hover:g} is outside what the motors can hover ({e})",
+            field="MPC_THR_HOVER",
+        ) from None
+    return total

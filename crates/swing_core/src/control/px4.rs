@@ -294,6 +294,12 @@ impl Px4Cascade {
         vehicle.command_for_thrust(mass * GRAVITY / 4.0)
     }
 
+    /// Total mass [kg] `vehicle`'s four motors hold at the normalised `hover` thrust: the
+    /// inverse of [`Self::hover_thrust_for`] (PX4's `MPC_THR_HOVER` read as a mass).
+    pub fn mass_hovering_at(vehicle: &VehicleParams, hover: f64) -> f64 {
+        4.0 * vehicle.thrust_at(hover) / GRAVITY
+    }
+
     /// Gains and limits in use.
     pub fn params(&self) -> &Px4Params {
         &self.p

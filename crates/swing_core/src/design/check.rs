@@ -95,6 +95,56 @@ pub fn overshoot(v: &[f64], v_before: f64, v_after: f64) -> f64 {
         .fold(f64::NEG_INFINITY, f64::max)
 }
 
+/// Span at the end of a step flight over which final values (velocity, swing) are averaged
+/// [s]: the flight metrics' "final" (`ss_error`, the swing's) and the twin's.
+pub const FINAL_SPAN: f64 = 2.0;
+
+/// The swing IAE of a step flight and its momentum floor [deg·s] (see [`swing_iae`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SwingIae {
+    /// ∫ |swing − final| dt.
+    pub iae: f64,
+    /// |∫ (along − final) dt|: what the step's change of the payload's momentum needs and no
+    /// controller can remove (the cable is all that accelerates the payload horizontally).
+    pub floor: f64,
+}
+
+impl SwingIae {
+    /// The part of the swing IAE a controller decides: the IAE above its floor.
+    pub fn excess(&self) -> f64 {
+        self.iae - self.floor
+    }
+}
+
+/// The one definition of the swing IAE after a step, of the flight metrics
+/// (`swing_iae_deg_s`, `swing_excess_iae_deg_s`) and the twin's: over the samples `t` [s]
+/// from the step on, `swing` [rad] is the swing (its magnitude for two axes) and `along`
+/// [rad] the swing along the step; "final" is each one's mean over the last
+/// [`FINAL_SPAN`]; integrals are left Riemann sums. NaN for fewer than two samples or
+/// lengths that differ.
+pub fn swing_iae(t: &[f64], swing: &[f64], along: &[f64]) -> SwingIae {
+    let n = t.len();
+    if n < 2 || swing.len() != n || along.len() != n {
+        return SwingIae {
+            iae: f64::NAN,
+            floor: f64::NAN,
+        };
+    }
+    let tail = t.partition_point(|&x| x < t[n - 1] - FINAL_SPAN);
+    let final_of = |x: &[f64]| x[tail..].iter().sum::<f64>() / (n - tail) as f64;
+    let (s_final, a_final) = (final_of(swing), final_of(along));
+    let (mut iae, mut signed) = (0.0, 0.0);
+    for k in 0..n - 1 {
+        let dt = t[k + 1] - t[k];
+        iae += (swing[k] - s_final).abs() * dt;
+        signed += (along[k] - a_final) * dt;
+    }
+    SwingIae {
+        iae: iae.to_degrees(),
+        floor: signed.abs().to_degrees(),
+    }
+}
+
 /// Outcome of a closed-loop step check; errors are worst over the axes, relative to the step.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepCheck {
@@ -143,6 +193,37 @@ pub fn mpc_step_check(
 ) -> Result<StepCheck, ControlError> {
     let mut mpc = MpcController::new(controller, settings)?;
     step_check_with(&mut mpc, controller, plant, check)
+}
+
+/// Worst figures of `mpc`, designed on `controller`, flying a `step` [m/s] on each of
+/// `plants` behind each of `input_lags` [s]: the one worst-case loop of the offline
+/// selection and the adaptive swap.
+pub fn worst_step_check(
+    mpc: &mut MpcController,
+    controller: &LinearModel,
+    plants: &[LinearModel],
+    input_lags: &[f64],
+    step: f64,
+) -> Result<StepCheck, ControlError> {
+    let mut worst = StepCheck {
+        overshoot: f64::NEG_INFINITY,
+        final_error: f64::NEG_INFINITY,
+        hold_drift: f64::NEG_INFINITY,
+    };
+    for plant in plants {
+        for &input_lag in input_lags {
+            let check = StepCheckSettings {
+                step,
+                input_lag,
+                ..StepCheckSettings::default()
+            };
+            let r = step_check_with(mpc, controller, plant, &check)?;
+            worst.overshoot = worst.overshoot.max(r.overshoot);
+            worst.final_error = worst.final_error.max(r.final_error);
+            worst.hold_drift = worst.hold_drift.max(r.hold_drift);
+        }
+    }
+    Ok(worst)
 }
 
 /// [`mpc_step_check`] with a controller already built on `controller` (reset at the start):
@@ -504,4 +585,52 @@ pub fn noise_gain(
         rms_u: rms(&nl.c_u, &nl.d_u),
         rms_du: rms(&nl.c_du, &nl.d_du),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid(n: usize, dt: f64) -> Vec<f64> {
+        (0..n).map(|k| k as f64 * dt).collect()
+    }
+
+    #[test]
+    fn a_one_sided_lean_is_all_floor_and_an_oscillation_all_excess() {
+        // Lean θ₀ for 3 s, then hang still for 3 s: ∫|θ| = |∫θ| = 3θ₀, nothing in excess.
+        let dt = 0.001;
+        let t = grid(6000, dt);
+        let lean: Vec<f64> = t.iter().map(|&x| if x < 3.0 { 0.1 } else { 0.0 }).collect();
+        let r = swing_iae(&t, &lean, &lean);
+        assert!((r.iae - 0.3_f64.to_degrees()).abs() < 1e-2, "{r:?}");
+        assert!(
+            (r.floor - r.iae).abs() < 1e-9 && r.excess().abs() < 1e-9,
+            "{r:?}"
+        );
+        // Three whole periods of A sin(2πt), then still: ∫|θ| = 3 · 2A/π, ∫θ = 0.
+        let a = 0.05;
+        let osc: Vec<f64> = t
+            .iter()
+            .map(|&x| {
+                if x < 3.0 {
+                    a * (std::f64::consts::TAU * x).sin()
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let r = swing_iae(&t, &osc, &osc);
+        let expected = (3.0 * 2.0 * a / std::f64::consts::PI).to_degrees();
+        assert!(
+            (r.iae - expected).abs() < 1e-3 * expected,
+            "{r:?} vs {expected}"
+        );
+        assert!(r.floor < 1e-6 && (r.excess() - expected).abs() < 1e-3 * expected);
+        // The final value is the mean of the last FINAL_SPAN: a steady lean there is not swing.
+        let offset: Vec<f64> = osc.iter().map(|x| x + 0.02).collect();
+        let shifted = swing_iae(&t, &offset, &offset);
+        assert!((shifted.iae - r.iae).abs() < 1e-9 && shifted.floor < 1e-6);
+        assert!(swing_iae(&t[..1], &osc[..1], &osc[..1]).iae.is_nan());
+        assert!(swing_iae(&t, &osc[..10], &osc).iae.is_nan());
+    }
 }

@@ -27,7 +27,7 @@ use serde_json::json;
 
 use crate::config::{finite, non_negative, positive, ConfigError};
 use crate::control::{ControlError, MpcController, MpcSettings};
-use crate::design::check::{step_check_with, StepCheck, StepCheckSettings};
+use crate::design::check::{worst_step_check, StepCheck};
 use crate::design::twin::{TwinFlight, TwinHold, TwinPlant};
 use crate::sysid::pipeline::{self, candidate_row};
 use crate::sysid::search::SearchResult;
@@ -331,25 +331,7 @@ fn worst_check(
     settings: &SelectionSettings,
 ) -> Result<StepCheck, ControlError> {
     let mut mpc = MpcController::new(model, mpc_settings.clone())?;
-    let mut worst = StepCheck {
-        overshoot: f64::NEG_INFINITY,
-        final_error: f64::NEG_INFINITY,
-        hold_drift: f64::NEG_INFINITY,
-    };
-    for plant in plants {
-        for &input_lag in &settings.input_lags {
-            let check = StepCheckSettings {
-                step: settings.step,
-                input_lag,
-                ..StepCheckSettings::default()
-            };
-            let r = step_check_with(&mut mpc, model, plant, &check)?;
-            worst.overshoot = worst.overshoot.max(r.overshoot);
-            worst.final_error = worst.final_error.max(r.final_error);
-            worst.hold_drift = worst.hold_drift.max(r.hold_drift);
-        }
-    }
-    Ok(worst)
+    worst_step_check(&mut mpc, model, plants, &settings.input_lags, settings.step)
 }
 
 /// Pick from `search` (run on `train`/`test` with `identify`) the model to fly an MPC with

@@ -4,7 +4,7 @@
 
 use crate::config::{positive, ConfigError};
 use crate::control::{ControlError, MpcController, MpcSettings};
-use crate::design::check::{overshoot, StepCheck};
+use crate::design::check::{overshoot, swing_iae, StepCheck, FINAL_SPAN};
 use crate::plant::{PayloadKind, WindParams};
 use crate::sim::{NoiseParams, Scenario, SetpointEntry, SimError, Simulator};
 use crate::sysid::LinearModel;
@@ -15,8 +15,6 @@ pub const TWIN_CHECK_SECONDS: f64 = 20.0;
 pub const TWIN_CHECK_STEP_AT: f64 = 2.0;
 /// Band around the new setpoint, as a fraction of the step, that a settled velocity stays in.
 pub const SETTLE_BAND: f64 = 0.05;
-/// Span at the end of a twin step flight over which the final error is averaged [s].
-const FINAL_SPAN: f64 = 1.0;
 /// Length of the twin's hold flight (the same step, held) [s]: long enough for a slow
 /// growth to show, and for the 2 s means of the velocity to average over many noise draws.
 pub const TWIN_HOLD_SECONDS: f64 = 60.0;
@@ -57,11 +55,10 @@ pub struct TwinFlight {
     /// Time after the step from which every axis' velocity stays within [`SETTLE_BAND`] of
     /// the new setpoint [s] (∞: it never does).
     pub settle: f64,
-    /// Swing left to the controller after the step, summed over the axes [deg·s]:
-    /// ∫|θ − θ_f| dt − |∫(θ − θ_f) dt| with θ_f the mean swing of the last second. The
-    /// second term is the payload's momentum change (g·∫θ dt ≈ Δv), which every controller
-    /// needs; what is left is swing that a damping controller removes (`metrics.csv`'s
-    /// `swing_excess_iae_deg_s`, on the twin).
+    /// Swing left to the controller after the step [deg·s]: `metrics.csv`'s
+    /// `swing_excess_iae_deg_s` on the twin, by the one definition
+    /// ([`crate::design::check::swing_iae`]): the swing IAE above the payload's momentum
+    /// change, which every controller needs.
     pub swing_excess: f64,
 }
 
@@ -319,10 +316,7 @@ fn measure(sim: &Simulator, step: f64, axes: usize) -> Result<TwinFlight, Contro
     };
     let after = t.partition_point(|&x| x < TWIN_CHECK_STEP_AT);
     let tail = t.partition_point(|&x| x < TWIN_CHECK_SECONDS - FINAL_SPAN);
-    for (v_name, swing_name) in [("vn", "swing_true_n"), ("ve", "swing_true_e")]
-        .iter()
-        .take(axes)
-    {
+    for v_name in ["vn", "ve"].iter().take(axes) {
         let v = column(v_name)?;
         let c = &mut out.check;
         c.overshoot = c.overshoot.max(overshoot(&v[after..], 0.0, step));
@@ -338,17 +332,21 @@ fn measure(sim: &Simulator, step: f64, axes: usize) -> Result<TwinFlight, Contro
             Some(k) => t[after + k + 1] - TWIN_CHECK_STEP_AT,
         };
         out.settle = out.settle.max(settle);
-        let swing = column(swing_name)?;
-        let last = mean(&swing[tail..]);
-        let (mut iae, mut signed) = (0.0, 0.0);
-        for k in after..t.len().saturating_sub(1) {
-            let dt = t[k + 1] - t[k];
-            let d = (swing[k] - last).to_degrees();
-            iae += d.abs() * dt;
-            signed += d * dt;
-        }
-        out.swing_excess += iae - signed.abs();
     }
+    // The swing as the flight metrics measure it: its magnitude, and along the step (the
+    // same step on every axis flown).
+    let sn = column("swing_true_n")?;
+    let se = column("swing_true_e")?;
+    let (swing, along): (Vec<f64>, Vec<f64>) = (after..t.len())
+        .map(|k| match axes {
+            1 => (sn[k], sn[k]),
+            _ => (
+                sn[k].hypot(se[k]),
+                (sn[k] + se[k]) / std::f64::consts::SQRT_2,
+            ),
+        })
+        .unzip();
+    out.swing_excess = swing_iae(&t[after..], &swing, &along).excess();
     if !(out.check.overshoot.is_finite()
         && out.check.final_error.is_finite()
         && out.swing_excess.is_finite())

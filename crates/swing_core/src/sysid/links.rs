@@ -12,8 +12,8 @@
 //! whatever holds the vehicle (PX4's loops, an MPC): the vehicle's acceleration is the
 //! forcing. A single pendulum is α = γ = 0, β = l/g. The three coefficients give the three
 //! unknowns: l₁ = α/γ, l₂ = βg − l₁, 1 + μ = l₂/(γg²). The swing sensor sees only the upper
-//! link, so the white-box (one FFT peak) takes a double pendulum for a single one of some
-//! length in between; its lower mode, which an MPC on a delay-coordinate model can excite
+//! link, so a single pendulum fitted to it takes a double pendulum for one of some length
+//! in between; its lower mode, which an MPC on a delay-coordinate model can excite
 //! unseen, is what this finds.
 //!
 //! The equation is fitted in continuous time through a state-variable filter λ⁴/(s+λ)⁴
@@ -320,15 +320,25 @@ fn simulation_error(
         .sqrt()
 }
 
-/// The double pendulum in the swing `theta` [rad] of the upper link, answering the
-/// vehicle's velocity `v` [m/s] on the same axis, both sampled every `dt` [s]; `None`
-/// when a single pendulum explains the swing as well (or the data cannot say).
-pub fn double_pendulum(
-    v: &[f64],
-    theta: &[f64],
-    dt: f64,
-    settings: &LinkSettings,
-) -> Option<DoublePendulum> {
+/// The payload's links as the vehicle's motion forces them: the single pendulum that
+/// explains the swing best and, when the swing shows one, a double pendulum.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LinkFit {
+    /// Length of the single pendulum l = βg [m]: from how the swing answers the vehicle's
+    /// acceleration, so neither the vehicle's mass nor what holds it enters, and the
+    /// quasi-static lean under a slow manoeuvre (which can outweigh the free oscillation in
+    /// the swing's spectrum) is part of the model rather than a spurious peak.
+    pub length: f64,
+    /// RMS error of the single pendulum's simulated swing against the measured one [rad].
+    pub error: f64,
+    /// A second link, when the double pendulum explains the swing clearly better.
+    pub double: Option<DoublePendulum>,
+}
+
+/// Fit the payload's links to the swing `theta` [rad] of the upper link, answering the
+/// vehicle's velocity `v` [m/s] on the same axis, both sampled every `dt` [s]; `None` when
+/// the data cannot say (too short, not finite, or no physical single pendulum fits).
+pub fn fit(v: &[f64], theta: &[f64], dt: f64, settings: &LinkSettings) -> Option<LinkFit> {
     if !dt.is_finite() || dt <= 0.0 || v.len() != theta.len() {
         return None;
     }
@@ -373,13 +383,19 @@ pub fn double_pendulum(
             best = Some((err, phys));
         }
     }
-    let (err, (length, length2, mass_ratio)) = best?;
-    let error_ratio = err / single_error;
-    (error_ratio <= 1.0 - settings.min_improvement).then_some(DoublePendulum {
-        length,
-        length2,
-        mass_ratio,
-        error_ratio,
+    let double = best.and_then(|(err, (length, length2, mass_ratio))| {
+        let error_ratio = err / single_error;
+        (error_ratio <= 1.0 - settings.min_improvement).then_some(DoublePendulum {
+            length,
+            length2,
+            mass_ratio,
+            error_ratio,
+        })
+    });
+    Some(LinkFit {
+        length: l,
+        error: single_error,
+        double,
     })
 }
 

@@ -80,10 +80,14 @@ pub struct WhiteboxEstimates {
     pub vehicle_mass: f64,
     /// Payload mass m_p [kg] (RLS on hover thrust, or given).
     pub payload_mass: f64,
-    /// Cable length l [m] (from the FFT peak, eq. 4.8, or given).
+    /// Cable length l [m]: given, or the single pendulum fitted to the swing's answer to
+    /// the vehicle's motion (`sysid::links::fit`), or the FFT peak's when that fit fails.
     pub length: f64,
     /// Measured swing frequency [Hz] (FFT peak), if the length was estimated.
     pub frequency_hz: Option<f64>,
+    /// The length the FFT peak gives (eq. 4.8, the thesis's estimate), if estimated [m].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fft_length: Option<f64>,
     /// Joint friction coefficient c of eq. 5.7 [N·m·s/rad].
     pub friction: f64,
     /// A second link found in the swing (`sysid::links`), when the length was estimated:

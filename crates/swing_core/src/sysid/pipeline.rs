@@ -229,8 +229,9 @@ pub fn search(
 }
 
 /// The white-box baseline on the training data: the payload mass is given (`payload_mass`,
-/// from the settings or an RLS estimate), the cable length from the settings or the FFT
-/// peak of the axis that swings most (eq. 4.8).
+/// from the settings or an RLS estimate), the cable length from the settings or, on the
+/// axis that swings most, the single pendulum that answers the vehicle's motion as the
+/// swing does (`links::fit`; the FFT peak of eq. 4.8 when that fit fails).
 pub fn whitebox_model(
     train: &Trajectory<'_>,
     states: &[String],
@@ -245,6 +246,7 @@ pub fn whitebox_model(
         )));
     }
     let mut links = None;
+    let mut fft_length = None;
     let (length, freq) = match settings.cable_length {
         Some(l) => (l, None),
         None => {
@@ -260,10 +262,14 @@ pub fn whitebox_model(
             let swing: Vec<f64> = (0..train.len).map(|k| train.state(k)[j]).collect();
             let [lo, hi] = settings.swing_band;
             let f = whitebox::fft_peak_frequency(&swing, settings.dt, lo, hi)?;
-            let l = whitebox::cable_length(f, settings.vehicle_mass, payload_mass, GRAVITY);
+            let l_fft = whitebox::cable_length(f, settings.vehicle_mass, payload_mass, GRAVITY);
+            fft_length = Some(l_fft);
             let v: Vec<f64> = (0..train.len).map(|k| train.state(k)[j - axes]).collect();
-            links = links::double_pendulum(&v, &swing, settings.dt, &LinkSettings::default());
-            (l, Some(f))
+            // The swing's answer to the vehicle's motion fixes the length whatever the
+            // flight's spectrum; the FFT peak (eq. 4.8) stands in when that fit fails.
+            let fitted = links::fit(&v, &swing, settings.dt, &LinkSettings::default());
+            links = fitted.and_then(|fit| fit.double);
+            (fitted.map_or(l_fft, |fit| fit.length), Some(f))
         }
     };
     let params = PendulumModel {
@@ -275,6 +281,7 @@ pub fn whitebox_model(
     let mut model = whitebox::model(&params, axes, settings.dt, freq)?;
     if let Some(wb) = model.diagnostics.whitebox.as_mut() {
         wb.links = links;
+        wb.fft_length = fft_length;
         let j = (axes..2 * axes).next().expect("at least one axis");
         let swing: Vec<f64> = (0..train.len).map(|k| train.state(k)[j]).collect();
         wb.swing_noise = whitebox::noise_std(&swing);

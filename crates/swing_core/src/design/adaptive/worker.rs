@@ -8,7 +8,7 @@ use std::thread::JoinHandle;
 
 use super::settings::{AdaptiveSettings, SynthesisMode};
 use crate::control::{ControlError, MpcController, MpcSettings};
-use crate::design::check::{step_check_with, StepCheck, StepCheckSettings};
+use crate::design::check::{worst_step_check, StepCheck};
 use crate::design::reidentify::Twin;
 use crate::sysid::online::model_from_factor;
 use crate::sysid::{LinearModel, Offset};
@@ -116,25 +116,14 @@ impl Synthesizer {
             );
         }
         let mut checked = MpcController::new(&bare, self.mpc.clone()).map_err(|e| e.to_string())?;
-        let mut worst = StepCheck {
-            overshoot: f64::NEG_INFINITY,
-            final_error: f64::NEG_INFINITY,
-            hold_drift: f64::NEG_INFINITY,
-        };
-        for plant in &plants {
-            for &input_lag in &self.settings.input_lags {
-                let c = StepCheckSettings {
-                    step: self.settings.check_step,
-                    input_lag,
-                    ..StepCheckSettings::default()
-                };
-                let r =
-                    step_check_with(&mut checked, &bare, plant, &c).map_err(|e| e.to_string())?;
-                worst.overshoot = worst.overshoot.max(r.overshoot);
-                worst.final_error = worst.final_error.max(r.final_error);
-                worst.hold_drift = worst.hold_drift.max(r.hold_drift);
-            }
-        }
+        let worst = worst_step_check(
+            &mut checked,
+            &bare,
+            &plants,
+            &self.settings.input_lags,
+            self.settings.check_step,
+        )
+        .map_err(|e| e.to_string())?;
         *check_out = Some(worst);
         if !self.settings.bounds.admit(&worst) {
             return Err(format!(
