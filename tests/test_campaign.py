@@ -7,6 +7,7 @@ about a minute; the CLI runs in subprocesses so Dask's processes never share pyt
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import signal
@@ -239,6 +240,33 @@ def test_a_white_box_that_fails_does_not_stop_the_data_driven_model():
     assert by["mpc"]["wb_payload_mass"] is None
     assert "white-box not estimated with vehicle mass 0.952 kg" in by["lqr"]["error"]
     assert "not positive" in by["lqr"]["error"] and math.isnan(by["lqr"]["peak_swing_deg"])
+
+
+@pytest.mark.parametrize("twin", ["off", "builtin"])
+def test_a_study_says_which_twin_its_selection_flies(tmp_path, twin):
+    """``[identify] twin``: ``off`` flies none, ``builtin`` the built-in vehicle (a twin that
+    is not the 0.7x vehicle flown), and the selection's diagnostics say which."""
+    rows, _ = fly_sample(_vehicle({"twin": twin}), 0, out=tmp_path)
+    by = {r["controller"]: r for r in rows}
+    assert by["mpc"]["error"] == "", by["mpc"]["error"]
+    cc = json.loads((tmp_path / "model.json").read_text())["diagnostics"]["control_check"]
+    if twin == "off":
+        assert cc["twin"] is None
+    else:
+        assert f"{0.952:.3f} kg vehicle" in cc["twin"]["plant"], cc["twin"]["plant"]
+
+
+def test_an_unknown_twin_is_refused_by_name(tmp_path):
+    p = tmp_path / "bad.toml"
+    p.write_text(
+        'name = "x"\nsamples = 2\n[base]\nidentify = { twin = "nominal" }\n[vary]\n'
+        '"payload.mass" = { dist = "uniform", low = 0.1, high = 0.2 }\n',
+        encoding="utf-8",
+    )
+    with pytest.raises(
+        ConfigError, match=r"identify\.twin: one of exact, builtin, off, not 'nominal'"
+    ):
+        load_spec(p)
 
 
 def test_failure_rule():

@@ -284,7 +284,9 @@ def test_watchdog_rules():
     tel.t_pos = tel.t_swing = tel.t_heartbeat = 100.0
     assert wd.check_inputs(tel, 100.089) is None  # limit 3 Ts = 90 ms
     tel.t_swing = 99.909
-    assert "DEBUG_VECT SWING is 91 ms old (limit 90 ms)" in wd.check_inputs(tel, 100.0)
+    assert "DEBUG_VECT 'SWING' (swing sensor) is 91 ms old (limit 90 ms)" in wd.check_inputs(
+        tel, 100.0
+    )
     tel.t_swing, tel.t_pos = 100.0, 99.9
     assert "stale telemetry: LOCAL_POSITION_NED" in wd.check_inputs(tel, 100.0)
     tel.t_pos = tel.t_swing = 103.5  # telemetry fresh but no heartbeat for 3.5 s

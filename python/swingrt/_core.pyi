@@ -16,6 +16,7 @@ __all__ = [
     "GRAVITY",
     "Guidance",
     "HilPlant",
+    "ImuSwingEstimator",
     "LinearModel",
     "Lqr",
     "MOTOR_COLUMNS",
@@ -32,6 +33,7 @@ __all__ = [
     "care",
     "check_settings",
     "dare",
+    "estimate_swing",
     "evaluate",
     "geo_project",
     "geo_reproject",
@@ -103,6 +105,33 @@ class HilPlant:
     def step(self, motors: Sequence[float]) -> None: ...
     def sensors(self) -> dict[str, Any]: ...
     def take_trace(self) -> dict[str, npt.NDArray[np.float64]]: ...
+
+@final
+class ImuSwingEstimator:
+    """The swing estimated from the IMU, one sample every 1/rate s."""
+
+    def __new__(cls, settings: Mapping[str, Any] | None = None) -> Self: ...
+    def update(
+        self, accel: Sequence[float], q: Sequence[float], vel: Sequence[float]
+    ) -> tuple[float, float]: ...
+    @property
+    def estimate(self) -> tuple[float, float]: ...
+    @property
+    def rate_estimate(self) -> tuple[float, float]: ...
+    @property
+    def tared(self) -> bool: ...
+    @property
+    def offset(self) -> tuple[float, float]: ...
+    @property
+    def settings(self) -> dict[str, Any]: ...
+    def reset(self) -> None: ...
+
+def estimate_swing(
+    accel: npt.NDArray[np.float64],
+    q: npt.NDArray[np.float64],
+    vel: npt.NDArray[np.float64],
+    settings: dict[str, Any] | None = None,
+) -> npt.NDArray[np.float64]: ...
 
 @final
 class Simulator:

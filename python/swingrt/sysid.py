@@ -38,6 +38,8 @@ from swingrt.errors import ConfigError, DataError, IdentificationError
 
 __all__ = [
     "AXES",
+    "PLAN_KEYS",
+    "TWINS",
     "DEFAULT_CHECK_PAYLOAD_MASS",
     "LinearModel",
     "SearchResult",
@@ -55,6 +57,16 @@ __all__ = [
     "swing_source",
     "to_statespace",
 ]
+
+#: Keys of an experiment's ``[identify]`` that say how the identification is run, not core
+#: identification settings: ``search`` (bool: search q and p) and ``twin`` (one of
+#: :data:`TWINS`).
+PLAN_KEYS = ("search", "twin")
+
+#: What flies as the vehicle's twin in a study's control-relevant selection: ``"exact"`` the
+#: training flight's own vehicle (its airframe and PX4 gains), ``"builtin"`` the built-in
+#: vehicle whatever the study flies (a twin that is not the plant), ``"off"`` no twin.
+TWINS = ("exact", "builtin", "off")
 
 #: State and input columns per axis choice.
 AXES: dict[str, tuple[list[str], list[str]]] = {
@@ -191,8 +203,26 @@ def _swing_columns(data: Any) -> tuple[Mapping[str, Any], str]:
     return out, src
 
 
-def _with_source(model: LinearModel, source: str) -> LinearModel:
-    return model.with_diagnostics({"swing_source": source})
+def swing_estimator(data: Any) -> dict[str, Any] | None:
+    """The settings of the estimator that made a flight's ``swing_est_*`` columns: a ULog's
+    (``meta["swing_estimator"]``) or the simulated flight's scenario's
+    (``sensors.estimator``); None when the flight does not say."""
+    meta = getattr(data, "meta", None) or {}
+    if meta.get("swing_estimator") is not None:
+        return dict(meta["swing_estimator"])
+    sensors = (meta.get("scenario") or {}).get("sensors") or {}
+    est = sensors.get("estimator")
+    return None if est is None else dict(est)
+
+
+def _with_source(model: LinearModel, data: Any) -> LinearModel:
+    """``model`` with the flight's swing source in its diagnostics and, for ``imu``, the
+    estimator's settings: a flight on the model must estimate the swing the same way."""
+    source = swing_source(data)
+    extra: dict[str, Any] = {"swing_source": source}
+    if source == "imu":
+        extra["swing_estimator"] = swing_estimator(data)
+    return model.with_diagnostics(extra)
 
 
 def _axes(axes: str) -> tuple[list[str], list[str]]:
@@ -258,7 +288,7 @@ def search(
     x, u, states, inputs = _prepare(data, axes, s)
     model, found = _core.identify(x, u, states, inputs, s)
     table = found.table() if found is not None else []
-    model = _with_source(model, swing_source(data))
+    model = _with_source(model, data)
     return SearchResult(model=model, table=table, search=found, settings=s)
 
 
@@ -283,7 +313,7 @@ def identify(data: Any, *, axes: str = "n", **settings: Any) -> LinearModel:
     if s["method"] == "whitebox" and s["payload_mass"] is None:
         mass = estimate_payload_mass(data, vehicle_mass=s["vehicle_mass"], skip=s["test_span"])
     model, _ = _core.identify(x, u, states, inputs, s, payload_mass=mass)
-    return _with_source(model, swing_source(data))
+    return _with_source(model, data)
 
 
 def select_for_control(
@@ -334,7 +364,9 @@ def select_for_control(
     MPC's Kalman measurement noise raised ``noise_retry`` times; when that does better, the
     model carries the raised noise (``diagnostics['measurement_noise']``) and every MPC
     built on it assumes at least that. Without a white-box (a model-only check) the twin is
-    not flown."""
+    not flown. A flight identified on the IMU's swing estimate (:func:`swing_source`) flies
+    the twin on the same estimate (its ``sensors`` set to the flight's swing source and
+    estimator)."""
     if result.search is None:
         raise ConfigError("result: not from a search (no candidates to check)", field="result")
     s = identify_settings(**{**result.settings, **settings})
@@ -357,11 +389,19 @@ def select_for_control(
         twin = _core.Scenario.builtin("step")
     if plant.method != "whitebox":
         twin = None
+    if twin is not None and swing_source(data) == "imu":
+        # The twin measures the swing as the flight did: the model's swing output is the IMU
+        # estimate (its scale and the drag it carries), and its MPC flies on that estimate.
+        sensors: dict[str, Any] = {"swing": "imu"}
+        est = swing_estimator(data)
+        if est is not None:
+            sensors["estimator"] = est
+        twin = twin.with_overrides({"sensors": sensors})
     x, u, states, inputs = _prepare(data, axes, s)
     model, _passed = _core.select_for_control(
         x, u, states, inputs, s, result.search, plant, mpc_settings, selection, twin
     )
-    model = _with_source(model, swing_source(data))
+    model = _with_source(model, data)
     return SearchResult(model=model, table=result.table, search=result.search, settings=s)
 
 

@@ -58,7 +58,8 @@ impl PyHilPlant {
     }
 
     /// The sensor readings of the current step as a dict in HIL_SENSOR / HIL_GPS units
-    /// (`gps` is None when no fix is due), with the swing sensor and the ground truth.
+    /// (`gps` is None when no fix is due), with the swing sensor and the ground truth (the
+    /// true swing of the first link N, E [rad] as `swing_true`).
     fn sensors<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let f = self.inner.sensors();
         let d = PyDict::new(py);
@@ -71,6 +72,8 @@ impl PyHilPlant {
         d.set_item("temperature", f.temperature)?;
         d.set_item("fields_updated", f.fields_updated)?;
         d.set_item("swing", f.swing)?;
+        let truth = self.inner.true_swing();
+        d.set_item("swing_true", [truth[0], truth[1]])?;
         d.set_item("attitude", f.attitude)?;
         d.set_item("position", f.position)?;
         d.set_item("velocity", f.velocity)?;

@@ -11,6 +11,7 @@ mod errors;
 mod hil;
 mod methods;
 mod mission;
+mod sensors;
 mod sim;
 mod sysid;
 
@@ -25,5 +26,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     control::register(m)?;
     methods::register(m)?;
     mission::register(m)?;
+    sensors::register(m)?;
     Ok(())
 }

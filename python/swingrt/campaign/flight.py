@@ -145,7 +145,7 @@ def fly_sample(
         try:
             train = _run(train_sc, False, "collect")
             plots = None if out is None else out / "error_vs_delays.png"
-            model, wb, lqr = identify_case(train, exp, plots, twin=train_sc)
+            model, wb, lqr = identify_case(train, exp, plots, vehicle=train_sc)
             cc = model.diagnostics.get("control_check")
             ident = {
                 "q": int(model.delays),

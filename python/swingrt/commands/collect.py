@@ -26,6 +26,14 @@ def add_parser(sub) -> argparse.ArgumentParser:
         help="axes of the random steps: n (default) or ne (North and East, for two-axis models)",
     )
     p.add_argument("--connect", help="MAVLink URL: fly the mission on a vehicle instead")
+    p.add_argument(
+        "--swing-source",
+        choices=("sensor", "imu"),
+        default=None,
+        help="how the record measures the swing: the swing sensor (default; over MAVLink its "
+        "DEBUG_VECT 'SWING') or none on the cable, the swing estimated from the IMU (over "
+        "MAVLink PX4's HIGHRES_IMU, with the scenario's estimator settings)",
+    )
     return p
 
 
@@ -33,21 +41,27 @@ def run(args) -> int:
     """Run the subcommand."""
     check_duration(args.duration)
     check_output(args.output)
+    from swingrt.scenario import resolve
+
+    config = resolve(args.scenario, default="training")
+    if args.swing_source is not None:
+        config = config.with_overrides({"sensors": {"swing": args.swing_source}})
     if args.connect:
         from swingrt.mavlink import collect_over_mavlink
 
+        sensors = config.to_dict()["sensors"]
+        imu = sensors["swing"] == "imu"
         collect_over_mavlink(
             args.connect,
             duration=args.duration or 300.0,
             seed=args.seed or 0,
             out=args.output,
             axes=args.axes or "n",
+            swing_estimator=dict(sensors["estimator"]) if imu else None,
         )
         return 0
-    from swingrt.scenario import resolve
     from swingrt.sim import collect
 
-    config = resolve(args.scenario, default="training")
     if args.axes == "ne":
         config = config.with_overrides(
             {

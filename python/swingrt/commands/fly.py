@@ -72,7 +72,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 def run(args) -> int:
     """Fly; print the loop timing; any failure is one line and a non-zero exit."""
     from swingrt.mavlink.link import connect
-    from swingrt.mavlink.offboard import Mission, Watchdog, fly, load_controller
+    from swingrt.mavlink.offboard import (
+        Mission,
+        Watchdog,
+        fly,
+        load_controller,
+        model_swing_estimator,
+    )
 
     # Finite too: an infinite stale factor, budget or acceleration limit switches a safety
     # net off, and an infinite --timeout waits for ever on a silent link.
@@ -112,6 +118,7 @@ def run(args) -> int:
             heartbeat_timeout=args.timeout,
             telemetry_timeout=args.timeout,
             watchdog=watchdog,
+            swing_estimator=model_swing_estimator(args.model),
         )
     finally:
         conn.close()

@@ -62,10 +62,10 @@ def run(args) -> int:
         from swingrt.errors import ConfigError
         from swingrt.hil.pipeline import run_on_px4
 
-        if args.swing_source != "sensor":
+        if args.swing_source == "body":
             raise ConfigError(
-                "--swing-source: only the swing sensor is flown on PX4 SITL so far "
-                "(run on the built-in simulator without --px4)"
+                "--swing-source body: the cable sensor on the airframe is not flown on PX4 "
+                "SITL yet (sensor or imu are; body runs on the built-in simulator)"
             )
 
         rows = run_on_px4(
@@ -76,6 +76,7 @@ def run(args) -> int:
             training=args.training,
             quiet=args.quiet,
             twin=not args.no_twin,
+            swing_source=args.swing_source,
         )
         print((Path(args.out) / "metrics.md").read_text(encoding="utf-8"))
         by = {r["controller"]: r for r in rows}

@@ -18,13 +18,13 @@ if TYPE_CHECKING:
 
 
 def identify_case(
-    train: Trace, exp: Experiment, plots: Path | None = None, twin: Scenario | None = None
+    train: Trace, exp: Experiment, plots: Path | None = None, vehicle: Scenario | None = None
 ) -> tuple[Any, Any | None, dict[str, float] | None]:
     """DMDc (with search) for the MPC, white-box estimates for the LQR; with ``plots`` the
-    search's error-vs-q plot (the Pareto elbow) is written there. ``twin`` (the training
-    flight's scenario) adds the twin step flight to the control-relevant selection and
-    describes the vehicle: its mass is the white-box's ``vehicle_mass`` unless
-    ``[identify]`` gives one.
+    search's error-vs-q plot (the Pareto elbow) is written there. ``vehicle`` (the training
+    flight's scenario) describes the vehicle: its mass is the white-box's ``vehicle_mass``
+    unless ``[identify]`` gives one, and the control-relevant selection flies the twin that
+    ``[identify] twin`` names (:func:`case_twin`).
 
     The data-driven model never waits on the white-box: when the white-box cannot be
     estimated (a payload mass that comes out non-positive, no swing peak), the white-box
@@ -33,14 +33,19 @@ def identify_case(
     from swingrt.reports import plot_pareto
     from swingrt.sysid import identify, search, select_for_control
 
-    described = _vehicle_mass(twin)
-    vehicle = {} if described is None else {"vehicle_mass": described}
-    opts = {"method": "dmdc", **vehicle, **exp.identify}
+    described = _vehicle_mass(vehicle)
+    mass = {} if described is None else {"vehicle_mass": described}
+    opts = {"method": "dmdc", **mass, **exp.identify}
+    opts.pop("twin", None)
     if opts.pop("search", True) and "delays" not in opts:
         result = search(train, axes=exp.axes, **opts)
         if "mpc" in exp.controllers and result.settings["select"] == "control":
             result = select_for_control(
-                train, result, axes=exp.axes, mpc_settings=exp.mpc or None, twin=twin
+                train,
+                result,
+                axes=exp.axes,
+                mpc_settings=exp.mpc or None,
+                twin=case_twin(exp, vehicle),
             )
         model = result.model
         if plots is not None:
@@ -49,7 +54,7 @@ def identify_case(
         model = identify(train, axes=exp.axes, **opts)
     wb_opts = {k: exp.identify[k] for k in _WHITEBOX_KEYS if k in exp.identify}
     try:
-        wb = identify(train, method="whitebox", axes=exp.axes, **{**vehicle, **wb_opts})
+        wb = identify(train, method="whitebox", axes=exp.axes, **{**mass, **wb_opts})
     except (DataError, IdentificationError) as exc:
         assumed = opts.get("vehicle_mass")
         mass = "the default vehicle mass" if assumed is None else f"vehicle mass {assumed:g} kg"
@@ -84,6 +89,19 @@ def without_whitebox(exp: Experiment, model: Any, lqr: dict[str, float] | None) 
     }
 
 
+def case_twin(exp: Experiment, vehicle: Scenario | None) -> Scenario | str | None:
+    """The twin the selection of ``exp`` flies, as ``[identify] twin`` says
+    (:data:`swingrt.sysid.TWINS`; default ``"exact"``): the training flight's own
+    ``vehicle``, the built-in one (``"builtin"``: a twin that is not the plant, as a user
+    without a description of the vehicle has) or none."""
+    choice = exp.identify.get("twin", "exact")
+    if choice == "off":
+        return None
+    if choice == "builtin":
+        return "builtin"
+    return vehicle
+
+
 #: What ``[identify]`` may say of the vehicle and payload that the white-box uses too.
 _WHITEBOX_KEYS = ("vehicle_mass", "payload_mass", "cable_length")
 
@@ -101,13 +119,14 @@ def train_methods(
     exp: Experiment,
     model: Any,
     lqr: dict[str, float] | None,
-    twin: Scenario | None,
+    vehicle: Scenario | None,
 ) -> dict[str, Any]:
     """What each controller of :mod:`swingrt.methods` in ``exp.controllers`` learns from
-    the training flight (:func:`swingrt.methods.train`), by name."""
+    the training flight (:func:`swingrt.methods.train`), by name: ``vehicle`` (the training
+    flight's scenario) gives PX4's gains, and the selections fly :func:`case_twin`."""
     from swingrt.methods import train as train_method
 
-    px4 = twin.to_dict().get("controller") if twin is not None else None
+    px4 = vehicle.to_dict().get("controller") if vehicle is not None else None
     sections = {s: getattr(exp, s) for s in METHOD_SECTIONS}
     return {
         c: train_method(
@@ -120,7 +139,7 @@ def train_methods(
             px4=px4,
             identify=exp.identify,
             mpc_settings=exp.mpc or None,
-            twin=twin,
+            twin=case_twin(exp, vehicle),
         )
         for c in exp.controllers
         if c in METHODS

@@ -60,7 +60,7 @@ def run_experiment(
         train = _run(train_sc, False, "collect")
         log(f"{exp.name} [{i}/{len(all_cases)}] {case}: identification")
         model, wb, lqr = identify_case(
-            train, exp, out / f"{case}__error_vs_delays.png", twin=train_sc
+            train, exp, out / f"{case}__error_vs_delays.png", vehicle=train_sc
         )
         skipped = without_whitebox(exp, model, lqr)
         flown = [c for c in exp.controllers if c not in skipped]
@@ -76,7 +76,7 @@ def run_experiment(
         if "mpc_oracle" in exp.controllers:
             log(f"{exp.name} [{i}/{len(all_cases)}] {case}: oracle training flight")
             oracle_sc = oracle_training_scenario(exp, case, over, seed)
-            oracle, _, _ = identify_case(_run(oracle_sc, False, "collect"), exp, twin=oracle_sc)
+            oracle, _, _ = identify_case(_run(oracle_sc, False, "collect"), exp, vehicle=oracle_sc)
             oracle.save(out / f"{case}__oracle_model.json")
         traces: dict[str, Trace] = {}
         prediction = None

@@ -134,9 +134,16 @@ class Experiment:
         from swingrt import _core
 
         try:
-            ident = {k: v for k, v in self.identify.items() if k != "search"}
+            from swingrt.sysid import PLAN_KEYS, TWINS
+
+            ident = {k: v for k, v in self.identify.items() if k not in PLAN_KEYS}
             if not isinstance(self.identify.get("search", True), bool):
                 raise ConfigError("identify.search: must be true or false", field="identify.search")
+            twin = self.identify.get("twin", "exact")
+            if twin not in TWINS:
+                raise ConfigError(
+                    f"identify.twin: one of {', '.join(TWINS)}, not {twin!r}", field="identify.twin"
+                )
             _core.check_settings("identify", ident)
             _core.check_settings("mpc", self.mpc)
             _core.check_settings("lqr", self.lqr)

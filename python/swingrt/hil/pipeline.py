@@ -57,18 +57,28 @@ def run_on_px4(
     scenario=None,
     quiet: bool = False,
     twin: bool = True,
+    swing_source: str = "sensor",
 ) -> list[dict[str, Any]]:
     """Run the whole comparison on PX4 (module doc); returns the metrics rows. With
     ``twin`` the model selection flies each candidate first on the vehicle PX4's
     parameters describe, read from its own ULog (:func:`~swingrt.hil.params.vehicle_from_px4`,
     the mass it hovers at ``MPC_THR_HOVER``): what swingrt knows of a vehicle it has only
-    the log of."""
+    the log of. ``swing_source = "imu"``: no sensor on the cable (the simulator sends PX4 no
+    swing); the model is identified on the swing estimated from PX4's own IMU in its ULog,
+    and every flight's node estimates it the same way from HIGHRES_IMU; the metrics read
+    the simulator's true swing."""
     from swingrt import sysid
     from swingrt.experiments.schema import Experiment
     from swingrt.hil.session import HilSession
     from swingrt.io import load_flight
     from swingrt.io.flight import Trace
-    from swingrt.mavlink.offboard import Mission, Watchdog, fly, load_controller
+    from swingrt.mavlink.offboard import (
+        Mission,
+        Watchdog,
+        fly,
+        load_controller,
+        model_swing_estimator,
+    )
     from swingrt.mavlink.training import collect_over_mavlink, fly_velocity_mission
     from swingrt.metrics import step_metrics, swing_iae_floor
     from swingrt.reports import plot_pareto
@@ -77,8 +87,26 @@ def run_on_px4(
 
     if not (30.0 <= training < 86_400.0):
         raise ConfigError(f"--training must be 30 s or more, not {training}", field="training")
+    if swing_source not in ("sensor", "imu"):
+        raise ConfigError(
+            f"--swing-source: PX4 SITL flies 'sensor' or 'imu', not {swing_source!r}",
+            field="swing_source",
+        )
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    node: dict[str, Any] = {}
+    estimator = None
+    if swing_source == "imu":
+        if scenario is not None:
+            raise ConfigError("--swing-source imu: the built-in vehicle's scenario only")
+        from swingrt.io.atomic import write_text_atomic
+        from swingrt.scenario import resolve
+
+        scenario = out / "scenario.toml"
+        write_text_atomic(scenario, '[sensors]\nswing = "imu"\n')
+        estimator = resolve(scenario, default="hover").to_dict()["sensors"]["estimator"]
+        # Every flight's node estimates the swing from HIGHRES_IMU as the model expects.
+        node["swing_estimator"] = estimator
     case = "default-step"
     echo = None if quiet else (lambda line: print(line, file=sys.stderr, flush=True))
 
@@ -98,6 +126,7 @@ def run_on_px4(
             duration=training,
             seed=seed,
             out=out / f"{case}__node_training.parquet",
+            **node,
         )
     if not hil.ulogs:
         raise ConfigError(f"PX4 wrote no ULog in {out / 'px4-training'}")
@@ -107,7 +136,7 @@ def run_on_px4(
 
     # 2. identification from PX4's own log
     _say(quiet, f"[ identification ] from PX4's ULog {ulog.name}")
-    data = load_flight(ulog)
+    data = load_flight(ulog, estimator=estimator)
     data.to_parquet(out / f"{case}__training.parquet")
     result = sysid.search(data)
     twin_sc = None
@@ -141,7 +170,7 @@ def run_on_px4(
     ) as hil:
         _say(quiet, "[ px4 ] pid: PX4's velocity control on the 2 m/s step")
         path = out / f"{case}__pid.parquet"
-        fly_velocity_mission(hil.onboard_url, mission, out=path)
+        fly_velocity_mission(hil.onboard_url, mission, out=path, **node)
         traces["pid"] = Trace.from_parquet(path)
         time.sleep(SETTLE_S)
         _say(quiet, "[ px4 ] mpc: the MPC on the model from PX4's log")
@@ -159,6 +188,7 @@ def run_on_px4(
                 mission=mission,
                 log_path=path,
                 watchdog=Watchdog(ts, swing_limit=math.radians(30.0)),
+                swing_estimator=model_swing_estimator(out / f"{case}__model.json"),
             )
         finally:
             conn.close()
@@ -186,6 +216,7 @@ def run_on_px4(
     notes.append(
         f"model from PX4's ULog ({data.meta.get('segment', 'whole log')}): DMDc q = "
         f"{model.delays}, p = {model.rank}, test NMAE {float('nan') if nm is None else nm:.4f}"
+        f"; swing source {model.diagnostics.get('swing_source', 'sensor')}"
     )
     notes += summaries
     exp = Experiment(

@@ -6,7 +6,9 @@ The loop of one lockstep step (PX4's simulator_mavlink contract):
    a fix is due) and HIL_STATE_QUATERNION (ground truth, with the magnetometer frames);
 2. the swing sensor goes to PX4 as DEBUG_VECT "SWING" over a PX4 MAVLink link (the GCS
    link of SITL, or the same serial link on a Pixhawk in HITL), so PX4 publishes it, streams
-   it to the offboard computer and logs it, as on the real vehicle;
+   it to the offboard computer and logs it, as on the real vehicle; with no sensor on the
+   cable (swing source ``imu``) no "SWING" goes out, and the true swing goes as DEBUG_VECT
+   "SWTRUE", which the offboard node logs for the metrics and never flies on;
 3. once PX4 has answered a first HIL_ACTUATOR_CONTROLS, the plant advances one step only
    after PX4's motor commands for the last step arrived (PX4's clock is the sensor time, so
    it never starves and never runs ahead);
@@ -32,6 +34,8 @@ from swingrt.io.flight import Trace
 from swingrt.mavlink.link import (
     PX4_MAIN_MODE,
     PX4_SUB_MODE_AUTO,
+    SWING_NAME,
+    TRUTH_NAME,
     connect,
     decode_px4_mode,
     mavlink,
@@ -173,8 +177,15 @@ class HilServer:
             )  # fmt: skip
         if k % self.swing_every == 0:
             sn, se = f["swing"]
-            self.gcs.mav.debug_vect_send(b"SWING", t, sn, se, 0.0)
-            self.report.swing_messages += 1
+            if math.isfinite(sn) and math.isfinite(se):
+                self.gcs.mav.debug_vect_send(SWING_NAME.encode(), t, sn, se, 0.0)
+                self.report.swing_messages += 1
+            else:
+                # No sensor on the cable: nothing for PX4 to publish. The true swing goes
+                # under another name, for the flight's metrics only (the node never flies
+                # on it).
+                tn, te = f["swing_true"]
+                self.gcs.mav.debug_vect_send(TRUTH_NAME.encode(), t, tn, te, 0.0)
 
     # ------------------------------------------------------------------ messages in
 

@@ -10,8 +10,21 @@ PX4 ULog mapping (uORB topics, timestamps in microseconds):
                                             ``thrust`` <- ``|thrust[0..2]|`` (normalised)
 ``vehicle_attitude``                        ``roll pitch yaw`` <- ``q[0..3]`` (scalar first,
                                             body FRD -> NED), Euler ZYX
+``sensor_combined``                         ``imu_ax imu_ay imu_az`` <- ``accelerometer_m_s2[0..2]``
+                                            (body FRD specific force, PX4's 250 Hz IMU);
+                                            ``imu_gx imu_gy imu_gz`` <- ``gyro_rad[0..2]``
 swing sensor (configurable, see below)      ``swing_n swing_e`` = scale * raw + offset
 ==========================================  ==============================================
+
+The swing from the IMU: with ``sensor_combined``, ``vehicle_attitude`` and the velocity in the
+log, ``swing_est_n swing_est_e`` are the swing estimated from the vehicle's own IMU
+(``_core.estimate_swing``, the simulator's estimator: the accelerometer's body-horizontal
+specific force as the cable's pull, composed with the attitude), fed block means of
+``sensor_combined`` at the estimator's rate from the start of the flight segment (its tare),
+with ``estimator`` settings (``sensors.estimator`` of a scenario; default: the core's). A log
+without a swing sensor is then identified on the IMU (:func:`swingrt.sysid.swing_source`);
+``meta["swing_estimator"]`` holds the settings, which the model carries and the flight must
+use.
 
 Timeline: each topic keeps its own timestamps. Everything is merged onto the timeline of
 ``vehicle_local_position`` (the state estimate, the densest topic the identification needs),
@@ -40,7 +53,7 @@ from typing import Any
 
 import numpy as np
 
-from swingrt.errors import DataError
+from swingrt.errors import ConfigError, DataError
 from swingrt.io.flight import Trace
 
 __all__ = ["DEFAULT_ULOG_SWING", "euler_to_quat", "load_ulog", "quat_to_euler"]
@@ -133,8 +146,11 @@ def _offboard_segment(status) -> tuple[float, float] | None:
     return (lo, hi) if hi - lo >= MIN_OFFBOARD_SECONDS * 1e6 else None
 
 
-def load_ulog(p: Path, ulog_swing: Mapping | None = None) -> Trace:
-    """Read a PX4 ULog into trace columns on the local-position timeline (module doc)."""
+def load_ulog(
+    p: Path, ulog_swing: Mapping | None = None, estimator: Mapping | None = None
+) -> Trace:
+    """Read a PX4 ULog into trace columns on the local-position timeline (module doc);
+    ``estimator`` sets the swing estimate from the IMU (``ImuSwingSettings`` fields)."""
     try:
         from pyulog import ULog
     except ImportError:  # pragma: no cover - pyulog is a declared dependency
@@ -157,8 +173,8 @@ def load_ulog(p: Path, ulog_swing: Mapping | None = None) -> Trace:
         raise DataError(f"{p}: not a readable ULog file ({exc})", path=p) from None
 
     try:
-        return _trace_from_ulog(p, log, swing, explicit_swing)
-    except DataError:
+        return _trace_from_ulog(p, log, swing, explicit_swing, estimator)
+    except (DataError, ConfigError):
         raise
     except (KeyError, IndexError, ValueError, TypeError, OverflowError) as exc:
         # A corrupted file can parse into topics without the fields PX4 always writes.
@@ -167,7 +183,9 @@ def load_ulog(p: Path, ulog_swing: Mapping | None = None) -> Trace:
         ) from None
 
 
-def _trace_from_ulog(p: Path, log: Any, swing: dict, explicit_swing: bool) -> Trace:
+def _trace_from_ulog(
+    p: Path, log: Any, swing: dict, explicit_swing: bool, estimator: Mapping | None = None
+) -> Trace:
     """The trace columns of a parsed ULog (see :func:`load_ulog`)."""
     topics: dict[str, list] = {}
     for d in log.data_list:
@@ -240,6 +258,24 @@ def _trace_from_ulog(p: Path, log: Any, swing: dict, explicit_swing: bool) -> Tr
         q[:, flip] *= -1.0
         sources.append((t_att, {f"_q{i}": q[i] for i in range(4)}))
 
+    imu = topic("sensor_combined")
+    imu_fields = [f"accelerometer_m_s2[{i}]" for i in range(3)] + [
+        f"gyro_rad[{i}]" for i in range(3)
+    ]
+    imu_cols = ("imu_ax", "imu_ay", "imu_az", "imu_gx", "imu_gy", "imu_gz")
+    if imu is None or not all(f in imu[1] for f in imu_fields):
+        why = "ULog has no sensor_combined accelerometer/gyro (the IMU)"
+        for c in (*imu_cols, "swing_est_n", "swing_est_e"):
+            notes[c] = why
+        imu = None
+    else:
+        sources.append(
+            (
+                imu[0],
+                {c: imu[1][f].astype(float) for c, f in zip(imu_cols, imu_fields, strict=True)},
+            )
+        )
+
     st = topic(swing["topic"])
     swing_why = None
     if st is None:
@@ -286,6 +322,9 @@ def _trace_from_ulog(p: Path, log: Any, swing: dict, explicit_swing: bool) -> Tr
     segment = _offboard_segment(topic("vehicle_status"))
     if segment is not None:
         lo, hi = max(lo, segment[0]), min(hi, segment[1])
+    # The IMU estimate's tare wants the payload hanging still: the hover before the flight
+    # segment, where the log has one (as the offboard node tares in PX4's hold).
+    t_data_start = max([t_pos[0]] + [s[0][0] for s in sources])
     keep = (t_pos >= lo) & (t_pos <= hi)
     if keep.sum() < 2:
         raise DataError(f"{p}: the logged topics do not overlap in time", path=p)
@@ -305,8 +344,55 @@ def _trace_from_ulog(p: Path, log: Any, swing: dict, explicit_swing: bool) -> Tr
     for t_src, cols in sources:
         for c, y in cols.items():
             out[c] = _interp_topic(t_base, t_src, y)
+    if imu is not None and att is not None:
+        settings, est = _imu_swing(imu, att, t_pos, fpos, t_base, estimator, t_data_start)
+        out["swing_est_n"], out["swing_est_e"] = est
+        out.meta["swing_estimator"] = settings
     if "_q0" in out:
         q = np.stack([out.pop(f"_q{i}") for i in range(4)])
         q /= np.linalg.norm(q, axis=0)
         out["roll"], out["pitch"], out["yaw"] = quat_to_euler(*q)
     return out
+
+
+def _imu_swing(imu, att, t_pos, fpos, t_base, estimator, t_data_start=None):
+    """The swing estimated from the log's IMU on ``t_base`` [µs] (N, E) and the estimator's
+    settings: block means of ``sensor_combined`` over each 1/rate s (a decimation, so the
+    rotors' vibration does not alias), the attitude and velocity interpolated, fed to the
+    core's estimator, then interpolated back. The estimator starts its ``tare`` seconds
+    before ``t_base[0]`` when the log reaches back so far (``t_data_start``): the tare is
+    then the hover before the flight segment, not its first manoeuvre."""
+    from swingrt import _core
+
+    probe = _core.ImuSwingEstimator(dict(estimator) if estimator else None)
+    settings = dict(probe.settings)
+    period = 1e6 / float(settings["rate"])
+    start = t_base[0]
+    if t_data_start is not None:
+        start = max(float(t_data_start), t_base[0] - float(settings["tare"]) * 1e6)
+    grid = np.arange(start + period, t_base[-1] + 0.5 * period, period)
+    if len(grid) < 2:
+        nan = np.full(len(t_base), np.nan)
+        return settings, (nan, nan)
+    t_imu, f_imu = imu
+    acc = np.stack([f_imu[f"accelerometer_m_s2[{i}]"].astype(float) for i in range(3)], axis=1)
+    # Block means of the samples in (t - period, t]; a block with none takes the nearest.
+    csum = np.vstack([np.zeros((1, 3)), np.cumsum(acc, axis=0)])
+    hi = np.searchsorted(t_imu, grid, side="right")
+    lo = np.searchsorted(t_imu, grid - period, side="right")
+    count = (hi - lo)[:, None]
+    nearest = acc[np.clip(hi - 1, 0, len(acc) - 1)]
+    accel = np.where(count > 0, (csum[hi] - csum[lo]) / np.maximum(count, 1), nearest)
+    t_att, f_att = att
+    q = np.stack([f_att[f"q[{i}]"].astype(float) for i in range(4)])
+    flip = np.cumsum(np.r_[0, (np.einsum("ij,ij->j", q[:, 1:], q[:, :-1]) < 0)]) % 2 == 1
+    q[:, flip] *= -1.0
+    qg = np.stack([np.interp(grid, t_att, q[i]) for i in range(4)], axis=1)
+    qg /= np.linalg.norm(qg, axis=1, keepdims=True)
+    vel = np.stack(
+        [np.interp(grid, t_pos, fpos[f].astype(float)) for f in ("vx", "vy", "vz")], axis=1
+    )
+    est = _core.estimate_swing(
+        np.ascontiguousarray(accel), np.ascontiguousarray(qg), np.ascontiguousarray(vel), settings
+    )
+    return settings, (np.interp(t_base, grid, est[:, 0]), np.interp(t_base, grid, est[:, 1]))

@@ -26,6 +26,8 @@ from pymavlink import mavutil  # noqa: E402
 from swingrt.errors import LinkError  # noqa: E402
 
 __all__ = [
+    "SWING_NAME",
+    "TRUTH_NAME",
     "mavlink",
     "PX4_MAIN_MODE",
     "PX4_SUB_MODE_AUTO",
@@ -41,6 +43,13 @@ __all__ = [
 mavlink = mavutil.mavlink
 
 #: PX4 main modes (PX4-Autopilot src/modules/commander/px4_custom_mode.h).
+#: DEBUG_VECT name of the swing sensor's reading (x = N, y = E [rad]), which PX4 publishes,
+#: streams to the offboard computer and logs, and the controller flies on.
+SWING_NAME = "SWING"
+#: DEBUG_VECT name of a simulator's true swing (``swingrt hil`` without a swing sensor): the
+#: offboard node logs it as ``swing_true_*`` for the flight's metrics, never flies on it.
+TRUTH_NAME = "SWTRUE"
+
 PX4_MAIN_MODE = {
     "MANUAL": 1,
     "ALTCTL": 2,

@@ -4,8 +4,12 @@ Sequence (PX4 offboard rules, docs.px4.io "Offboard Mode"):
 
 1. wait for the autopilot's HEARTBEAT; request telemetry at 100 Hz with
    MAV_CMD_SET_MESSAGE_INTERVAL (LOCAL_POSITION_NED, ATTITUDE_QUATERNION, DEBUG_VECT,
-   POSITION_TARGET_LOCAL_NED); wait until position and the swing sensor (DEBUG_VECT "SWING")
-   arrive;
+   POSITION_TARGET_LOCAL_NED; HIGHRES_IMU when the swing comes from the IMU); wait until
+   position and the swing arrive: the swing sensor (DEBUG_VECT "SWING"), or with a model
+   identified on the IMU (``swing_source = "imu"``) the swing estimated from PX4's own IMU
+   (HIGHRES_IMU's body specific force, block means at the estimator's rate, composed with
+   ATTITUDE_QUATERNION by ``_core.ImuSwingEstimator`` with the model's settings), once its
+   tare (the payload hanging still in PX4's hold) is over;
 2. latch the altitude and heading; stream neutral setpoints for ``prestream`` seconds (PX4
    refuses OFFBOARD without a > 2 Hz stream), then request OFFBOARD (MAV_CMD_DO_SET_MODE,
    custom main mode 6), retrying while TEMPORARILY_REJECTED;
@@ -40,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from swingrt._core import AdaptiveMpc, Mpc, check_settings
+from swingrt._core import AdaptiveMpc, ImuSwingEstimator, Mpc, check_settings
 from swingrt.errors import (
     ConfigError,
     ControlError,
@@ -53,6 +57,8 @@ from swingrt.io.flight import TRACE_COLUMNS, write_columns
 from swingrt.mavlink.link import (
     PX4_MAIN_MODE,
     PX4_SUB_MODE_AUTO,
+    SWING_NAME,
+    TRUTH_NAME,
     decode_px4_mode,
     mavlink,
     mode_name,
@@ -72,6 +78,7 @@ __all__ = [
     "OffboardSession",
     "fly",
     "load_controller",
+    "model_swing_estimator",
 ]
 
 log = logging.getLogger("swingrt.mavlink.offboard")
@@ -170,6 +177,7 @@ TELEMETRY_LIMITS: dict[str, tuple[float, ...]] = {
     "ATTITUDE_QUATERNION": (1.5, 0.1),
     "DEBUG_VECT": (math.pi,),
     "POSITION_TARGET_LOCAL_NED": (100.0,),
+    "HIGHRES_IMU": (1000.0,),
 }
 
 #: A time stamp this far back (ms; µs for DEBUG_VECT) is a reboot, not a replay.
@@ -178,18 +186,34 @@ REBOOT_JUMP: dict[str, int] = {
     "ATTITUDE_QUATERNION": 10_000,
     "DEBUG_VECT": 10_000_000,
     "POSITION_TARGET_LOCAL_NED": 10_000,
+    "HIGHRES_IMU": 10_000_000,
 }
+
+#: A gap in the IMU stream longer than this [µs] restarts the estimator's sample grid
+#: instead of feeding the held sample for every missed period.
+IMU_GAP_US = 100_000
 
 
 class Telemetry:
-    """Newest vehicle state from MAVLink, with the local receive time of each part."""
+    """Newest vehicle state from MAVLink, with the local receive time of each part. With an
+    ``estimator`` (``_core.ImuSwingEstimator``) the swing is the one it estimates from
+    HIGHRES_IMU, not a swing sensor's."""
 
-    def __init__(self):
+    def __init__(self, estimator: ImuSwingEstimator | None = None):
         nan = math.nan
         self.pos = [nan] * 3
         self.vel = [nan] * 3
         self.q = [1.0, 0.0, 0.0, 0.0]
         self.swing = [nan, nan]
+        #: A simulator's true swing (DEBUG_VECT :data:`TRUTH_NAME`), for the metrics only.
+        self.swing_true = [nan, nan]
+        self.estimator = estimator
+        self.t_imu = -math.inf
+        self._imu_sum = [0.0, 0.0, 0.0]
+        self._imu_count = 0
+        self._imu_last: list[float] | None = None
+        self._imu_next: float | None = None
+        self._imu_period = 1e6 / float(estimator.settings["rate"]) if estimator else math.inf
         self.acc_sp = [nan] * 3
         self.t_pos = self.t_att = self.t_swing = self.t_heartbeat = self.t_target = -math.inf
         self.mode: tuple[int, int] | None = None
@@ -235,9 +259,16 @@ class Telemetry:
             name = msg.name
             if isinstance(name, bytes):
                 name = name.decode("ascii", "replace")
-            if name.rstrip("\0") == "SWING":
+            name = name.rstrip("\0")
+            if name == SWING_NAME and self.estimator is None:
                 self.swing = [msg.x, msg.y]
                 self.t_swing = now
+            elif name == TRUTH_NAME:
+                self.swing_true = [msg.x, msg.y]
+        elif kind == "HIGHRES_IMU":
+            self.t_imu = now
+            if self.estimator is not None:
+                self._feed_imu(msg, now)
         elif kind == "POSITION_TARGET_LOCAL_NED":
             self.acc_sp = [msg.afx, msg.afy, msg.afz]
             self.t_target = now
@@ -252,6 +283,46 @@ class Telemetry:
         elif kind == "STATUSTEXT":
             text = msg.text if isinstance(msg.text, str) else msg.text.decode("ascii", "replace")
             log.info("vehicle: %s", text.rstrip("\0"))
+
+    def _feed_imu(self, msg, now: float) -> None:
+        """Block means of the IMU's specific force over each estimator period of PX4's
+        clock, each fed with the newest attitude and velocity (as a ULog's are,
+        :mod:`swingrt.io.ulog`); the swing is the estimate once the tare is over."""
+        if not all(math.isfinite(v) for v in self.vel):
+            return
+        t = float(msg.time_usec)
+        acc = (msg.xacc, msg.yacc, msg.zacc)
+        period = self._imu_period
+        if self._imu_next is None or t - self._imu_next > IMU_GAP_US:
+            self._imu_next = t + period
+            self._imu_sum, self._imu_count = [0.0, 0.0, 0.0], 0
+        if t <= self._imu_next:
+            for i in range(3):
+                self._imu_sum[i] += acc[i]
+            self._imu_count += 1
+            return
+        while t > self._imu_next:
+            if self._imu_count:
+                mean = [x / self._imu_count for x in self._imu_sum]
+                self._imu_last = mean
+            else:
+                mean = self._imu_last or list(acc)
+            self.estimator.update(mean, self.q, self.vel)
+            self._imu_sum, self._imu_count = [0.0, 0.0, 0.0], 0
+            self._imu_next += period
+        for i in range(3):
+            self._imu_sum[i] += acc[i]
+        self._imu_count += 1
+        if self.estimator.tared:
+            self.swing = list(self.estimator.estimate)
+            self.t_swing = now
+
+    @property
+    def swing_label(self) -> str:
+        """Where the swing comes from, for messages."""
+        if self.estimator is not None:
+            return "HIGHRES_IMU (the swing estimated from the IMU)"
+        return f"DEBUG_VECT '{SWING_NAME}' (swing sensor)"
 
     def _check(self, kind: str, msg) -> bool:
         """Whether a telemetry message is sane and new (else noted in :attr:`rejected`)."""
@@ -272,9 +343,14 @@ class Telemetry:
             return self._fresh(kind, msg.time_boot_ms)
         if kind == "DEBUG_VECT":
             name = msg.name.decode("ascii", "replace") if isinstance(msg.name, bytes) else msg.name
-            if name.rstrip("\0") != "SWING":
-                return True
+            if name.rstrip("\0") != SWING_NAME:
+                # The truth is only logged: sane values or NaN, never a freshness record.
+                return name.rstrip("\0") != TRUTH_NAME or self._sane(kind, (msg.x, msg.y), limit[0])
             return self._sane(kind, (msg.x, msg.y), limit[0]) and self._fresh(kind, msg.time_usec)
+        if kind == "HIGHRES_IMU":
+            return self._sane(kind, (msg.xacc, msg.yacc, msg.zacc), limit[0]) and self._fresh(
+                kind, msg.time_usec
+            )
         # POSITION_TARGET_LOCAL_NED: only the acceleration is read (position/velocity may
         # be NaN by design: the fields the type mask leaves out).
         return self._sane(kind, (msg.afx, msg.afy, msg.afz), limit[0]) and self._fresh(
@@ -307,9 +383,10 @@ class Watchdog:
     def check_inputs(self, tel: Telemetry, now: float) -> str | None:
         """Reason to abort before computing, or None."""
         limit = self.stale_factor * self.ts
+        swing_kind = "DEBUG_VECT" if tel.estimator is None else "HIGHRES_IMU"
         for name, kind, t in (
             ("LOCAL_POSITION_NED", "LOCAL_POSITION_NED", tel.t_pos),
-            ("DEBUG_VECT SWING", "DEBUG_VECT", tel.t_swing),
+            (tel.swing_label, swing_kind, tel.t_swing),
         ):
             if now - t > limit:
                 age, lim = (now - t) * 1e3, limit * 1e3
@@ -380,7 +457,7 @@ class FlightReport:
 # ----------------------------------------------------------------------------- session
 
 #: Columns the node logs: the trace columns (:data:`swingrt.io.TRACE_COLUMNS`) + loop timing.
-NODE_COLUMNS = (*TRACE_COLUMNS, "jitter_s", "compute_s")
+NODE_COLUMNS = (*TRACE_COLUMNS, "swing_true_n", "swing_true_e", "jitter_s", "compute_s")
 
 
 #: Most messages read per drain (one tick); the rest wait in the socket (or are dropped by it).
@@ -407,6 +484,7 @@ class OffboardSession:
         telemetry_timeout: float = 5.0,
         telemetry_hz: float = 100.0,
         watchdog: Watchdog | None = None,
+        swing_estimator: dict | None = None,
     ):
         if not (ts > 0 and math.isfinite(ts)):
             raise ConfigError(f"sample time must be positive, not {ts}")
@@ -421,7 +499,9 @@ class OffboardSession:
         self.telemetry_timeout = telemetry_timeout
         self.telemetry_hz = telemetry_hz
         self.watchdog = watchdog or Watchdog(ts)
-        self.tel = Telemetry()
+        self.tel = Telemetry(
+            None if swing_estimator is None else ImuSwingEstimator(dict(swing_estimator))
+        )
         self._next_beat = 0.0
 
     # -------------------------------------------------------------- plumbing
@@ -495,7 +575,15 @@ class OffboardSession:
             mavlink.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED,
         ):
             self._command(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, interval_us)
-        deadline = time.monotonic() + self.telemetry_timeout
+        est = self.tel.estimator
+        if est is not None:
+            imu_us = 1e6 / float(est.settings["rate"])
+            self._command(
+                mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_HIGHRES_IMU, imu_us
+            )
+        # The estimate's tare must fit in the wait for the first swing.
+        wait = self.telemetry_timeout + (0.0 if est is None else float(est.settings["tare"]))
+        deadline = time.monotonic() + wait
         while time.monotonic() < deadline:
             self._drain()
             if math.isfinite(self.tel.t_pos) and math.isfinite(self.tel.t_swing):
@@ -506,11 +594,15 @@ class OffboardSession:
             missing = []
             if not math.isfinite(self.tel.t_pos):
                 missing.append("LOCAL_POSITION_NED")
+            hint = ""
             if not math.isfinite(self.tel.t_swing):
-                missing.append("DEBUG_VECT 'SWING' (swing sensor)")
-            raise LinkError(
-                f"no {' and no '.join(missing)} from {url} within {self.telemetry_timeout:g} s"
-            )
+                missing.append(self.tel.swing_label)
+                if est is None:
+                    hint = (
+                        " (nothing on the cable? `collect --swing-source imu` records the "
+                        "swing from PX4's IMU)"
+                    )
+            raise LinkError(f"no {' and no '.join(missing)} from {url} within {wait:g} s{hint}")
         self.tel.acks.clear()
         self.alt_hold = self.tel.pos[2]
         self.yaw_hold = self.tel.euler()[2]
@@ -577,6 +669,9 @@ class OffboardSession:
         # has a strictly increasing, finite t (with a gap) instead of NaN rows.
         logged = np.isfinite(cols["t"][:n])
         out = {c: v[:n][logged] for c, v in cols.items()}
+        # A real vehicle has no true swing to log; only a simulator behind PX4 sends one.
+        if not np.isfinite(out["swing_true_n"]).any():
+            del out["swing_true_n"], out["swing_true_e"]
         ok = np.isfinite(out["jitter_s"])
         report = FlightReport(
             ts=self.ts,
@@ -674,6 +769,7 @@ class OffboardSession:
             "roll": roll, "pitch": pitch, "yaw": yaw,
             "swing_n": tel.swing[0], "swing_e": tel.swing[1],
             "swing_rate_n": rate[0], "swing_rate_e": rate[1],
+            "swing_true_n": tel.swing_true[0], "swing_true_e": tel.swing_true[1],
             "acc_sp_n": acc[0], "acc_sp_e": acc[1], "acc_sp_d": tel.acc_sp[2],
             "vel_sp_n": ref[0], "vel_sp_e": ref[1], "vel_sp_d": 0.0,
             "jitter_s": jitter, "compute_s": compute,
@@ -700,6 +796,26 @@ def load_controller(model_path, settings=None, *, adapt: bool = False, adaptive=
         opts = {"synthesis": "thread", **(adaptive or {})}
         return AdaptiveMpc(model, settings, opts), model.dt, axes
     return Mpc(model, settings), model.dt, axes
+
+
+def model_swing_estimator(model_path) -> dict | None:
+    """The swing estimator a flight on the model at ``model_path`` needs: its settings when
+    the model was identified on the swing estimated from the IMU (``swing_source = "imu"``;
+    the same estimator, or the model's swing output means something else), else None (a
+    swing sensor)."""
+    from swingrt.sysid import LinearModel
+
+    p = Path(model_path)
+    d = LinearModel.load(p).diagnostics
+    if d.get("swing_source") != "imu":
+        return None
+    est = d.get("swing_estimator")
+    if not isinstance(est, dict):
+        raise ModelError(
+            f"{p}: the model was identified on the IMU's swing estimate but does not say with "
+            "which estimator settings (diagnostics.swing_estimator)"
+        )
+    return dict(est)
 
 
 #: P gain [1/s] of the East velocity hold while a one-axis controller flies North.

@@ -51,6 +51,7 @@ from swingrt.io.flight import write_columns
 from swingrt.mavlink.link import (
     PX4_MAIN_MODE,
     PX4_SUB_MODE_AUTO,
+    SWING_NAME,
     connect,
     mavlink,
     mode_name,
@@ -376,7 +377,11 @@ class Vehicle:
             )
         elif msg_id == mavlink.MAVLINK_MSG_ID_DEBUG_VECT:
             us = int(round(s["t"] * 1e6))
-            self._each(lambda m: m.debug_vect_send(b"SWING", us, s["swing_n"], s["swing_e"], 0.0))
+            self._each(
+                lambda m: m.debug_vect_send(
+                    SWING_NAME.encode(), us, s["swing_n"], s["swing_e"], 0.0
+                )
+            )
         elif msg_id == mavlink.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED:
             sp = self._setpoint if self.mode == OFFBOARD and self._setpoint else None
             pos = [math.nan] * 3

@@ -218,10 +218,10 @@ def train(
         }
         used = models[0].training_seconds
     else:  # havokc_mpc
-        from swingrt.sysid import search, select_for_control
+        from swingrt.sysid import PLAN_KEYS, search, select_for_control
 
         s = dict(_core.check_settings("mpc", mpc_settings or None))
-        opts = {k: v for k, v in (identify or {}).items() if k not in ("method", "search")}
+        opts = {k: v for k, v in (identify or {}).items() if k != "method" and k not in PLAN_KEYS}
         opts.pop("delays", None)
         # HAVOKc has no one-factorisation-per-q path: its full q grid costs ~30 s a flight.
         # It shares the delay embedding with DMDc, so its search starts from the DMDc

@@ -170,7 +170,9 @@ impl TwinPlant {
             None => format!("payload {:.3} kg on {:.2} m", wb.payload_mass, wb.length),
         };
         let label = format!(
-            "twin (swingrt's simulator of the vehicle under PX4's cascade, {payload}, still air)"
+            "twin (swingrt's simulator of a {:.3} kg vehicle under PX4's cascade, {payload}, \
+             still air)",
+            sc.vehicle.mass
         );
         let mut pid = Simulator::new(sc.clone())
             .map_err(|e| ConfigError::new("twin", format!("twin scenario: {e}")))?;

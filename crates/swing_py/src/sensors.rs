@@ -1,0 +1,158 @@
+//! Bindings of `swing_core::sensors`: the swing estimated from the vehicle's own IMU, one
+//! sample at a time (the offboard node) or over a whole log (a PX4 ULog).
+
+use nalgebra::{Matrix3, Quaternion};
+use numpy::{IntoPyArray, PyArray2, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use swing_core::plant::dynamics::rotation;
+use swing_core::sensors::{ImuSwingEstimator, ImuSwingSettings};
+
+use crate::convert::{self, data_err};
+use crate::errors::to_py;
+
+/// The rotation body → NED of a quaternion (w, x, y, z), or a `DataError` naming `what()`
+/// when it is not finite or far from unit length (the name is built only then).
+fn attitude(q: [f64; 4], what: impl Fn() -> String) -> PyResult<Matrix3<f64>> {
+    let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
+    if !(n.is_finite() && (n - 1.0).abs() < 0.1) {
+        return Err(data_err(format!(
+            "{}: the attitude quaternion {q:?} is not a unit quaternion",
+            what()
+        )));
+    }
+    Ok(rotation(&Quaternion::new(
+        q[0] / n,
+        q[1] / n,
+        q[2] / n,
+        q[3] / n,
+    )))
+}
+
+fn finite3(x: [f64; 3], name: &str, what: &str) -> PyResult<()> {
+    if x.iter().all(|v| v.is_finite()) {
+        Ok(())
+    } else {
+        Err(data_err(format!("{what}: {name} {x:?} is not finite")))
+    }
+}
+
+/// The swing estimated from the IMU (`swing_core::sensors::ImuSwingEstimator`): fed one
+/// sample every 1/`rate` s, it returns the filtered world-frame swing (N, E) [rad]; the
+/// first `tare` seconds measure the accelerometer's offset with the payload hanging still.
+#[pyclass(name = "ImuSwingEstimator", module = "swingrt._core", unsendable)]
+pub struct PyImuSwingEstimator {
+    inner: ImuSwingEstimator,
+}
+
+#[pymethods]
+impl PyImuSwingEstimator {
+    /// An estimator with `settings` (a dict of `ImuSwingSettings`' fields; None: defaults).
+    #[new]
+    #[pyo3(signature = (settings=None))]
+    fn new(settings: Option<&Bound<'_, PyAny>>) -> PyResult<Self> {
+        let s: ImuSwingSettings = convert::settings(settings, "estimator")?;
+        let inner = ImuSwingEstimator::new(s).map_err(|e| to_py(e.within("estimator")))?;
+        Ok(Self { inner })
+    }
+
+    /// Feed one sample: body FRD specific force [m/s²], attitude quaternion (w, x, y, z,
+    /// body → NED) and NED velocity [m/s]; returns the filtered estimate (N, E) [rad].
+    fn update(&mut self, accel: [f64; 3], q: [f64; 4], vel: [f64; 3]) -> PyResult<(f64, f64)> {
+        finite3(accel, "accel", "IMU sample")?;
+        finite3(vel, "velocity", "IMU sample")?;
+        let rot = attitude(q, || "IMU sample".into())?;
+        let [n, e] = self.inner.update(accel, &rot, vel);
+        Ok((n, e))
+    }
+
+    /// The latest estimate (N, E) [rad].
+    #[getter]
+    fn estimate(&self) -> (f64, f64) {
+        let [n, e] = self.inner.estimate();
+        (n, e)
+    }
+
+    /// The latest estimate's rate (N, E) [rad/s].
+    #[getter]
+    fn rate_estimate(&self) -> (f64, f64) {
+        let [n, e] = self.inner.rate_estimate();
+        (n, e)
+    }
+
+    /// Whether the tare is over (a controller on the estimate engages only then).
+    #[getter]
+    fn tared(&self) -> bool {
+        self.inner.tared()
+    }
+
+    /// The accelerometer offset in use, body x then y [m/s²].
+    #[getter]
+    fn offset(&self) -> (f64, f64) {
+        let [x, y] = self.inner.offset();
+        (x, y)
+    }
+
+    /// The settings, as a dict.
+    #[getter]
+    fn settings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        convert::to_py_object(py, self.inner.settings())
+    }
+
+    /// Start over (a new flight): filters, tare and offset.
+    fn reset(&mut self) {
+        self.inner.reset();
+    }
+}
+
+/// The swing estimated from a whole log's IMU: `accel` (N×3, body FRD specific force
+/// [m/s²]), `q` (N×4 attitude quaternions w, x, y, z, body → NED) and `vel` (N×3, NED
+/// [m/s]), sampled every 1/`rate` s of `settings`, fed in order to a fresh estimator;
+/// returns the filtered estimate (N×2: N, E) [rad], the tare's samples included.
+#[pyfunction]
+#[pyo3(signature = (accel, q, vel, settings=None))]
+fn estimate_swing<'py>(
+    py: Python<'py>,
+    accel: &Bound<'py, PyAny>,
+    q: &Bound<'py, PyAny>,
+    vel: &Bound<'py, PyAny>,
+    settings: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let s: ImuSwingSettings = convert::settings(settings, "estimator")?;
+    let mut est = ImuSwingEstimator::new(s).map_err(|e| to_py(e.within("estimator")))?;
+    let accel = convert::array2(accel, "accel")?;
+    let q = convert::array2(q, "q")?;
+    let vel = convert::array2(vel, "vel")?;
+    let rows = accel.shape()[0];
+    for (name, a, width) in [("accel", &accel, 3), ("q", &q, 4), ("vel", &vel, 3)] {
+        if a.shape() != [rows, width] {
+            return Err(data_err(format!(
+                "{name} must be {rows}×{width} (got {:?})",
+                a.shape()
+            )));
+        }
+    }
+    let (a, qs, v) = (accel.as_slice()?, q.as_slice()?, vel.as_slice()?);
+    let mut out = numpy::ndarray::Array2::<f64>::zeros((rows, 2));
+    for k in 0..rows {
+        let ak = [a[3 * k], a[3 * k + 1], a[3 * k + 2]];
+        let vk = [v[3 * k], v[3 * k + 1], v[3 * k + 2]];
+        let qk = [qs[4 * k], qs[4 * k + 1], qs[4 * k + 2], qs[4 * k + 3]];
+        let what = || format!("sample {k}");
+        if !(ak.iter().chain(&vk).all(|x| x.is_finite())) {
+            finite3(ak, "accel", &what())?;
+            finite3(vk, "velocity", &what())?;
+        }
+        let rot = attitude(qk, what)?;
+        let [n, e] = est.update(ak, &rot, vk);
+        out[[k, 0]] = n;
+        out[[k, 1]] = e;
+    }
+    Ok(out.into_pyarray(py))
+}
+
+/// Register this domain's functions and classes on the module.
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyImuSwingEstimator>()?;
+    m.add_function(wrap_pyfunction!(estimate_swing, m)?)?;
+    Ok(())
+}
