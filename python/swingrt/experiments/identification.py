@@ -57,8 +57,8 @@ def identify_case(
         wb = identify(train, method="whitebox", axes=exp.axes, **{**mass, **wb_opts})
     except (DataError, IdentificationError) as exc:
         assumed = opts.get("vehicle_mass")
-        mass = "the default vehicle mass" if assumed is None else f"vehicle mass {assumed:g} kg"
-        why = f"white-box not estimated with {mass}: {exc}"
+        told = "the default vehicle mass" if assumed is None else f"vehicle mass {assumed:g} kg"
+        why = f"white-box not estimated with {told}: {exc}"
         return model.with_diagnostics({"whitebox_skipped": why}), None, None
     est = wb.diagnostics["whitebox"]
     lqr = {

@@ -288,7 +288,8 @@ class Telemetry:
         """Block means of the IMU's specific force over each estimator period of PX4's
         clock, each fed with the newest attitude and velocity (as a ULog's are,
         :mod:`swingrt.io.ulog`); the swing is the estimate once the tare is over."""
-        if not all(math.isfinite(v) for v in self.vel):
+        est = self.estimator
+        if est is None or not all(math.isfinite(v) for v in self.vel):
             return
         t = float(msg.time_usec)
         acc = (msg.xacc, msg.yacc, msg.zacc)
@@ -307,14 +308,14 @@ class Telemetry:
                 self._imu_last = mean
             else:
                 mean = self._imu_last or list(acc)
-            self.estimator.update(mean, self.q, self.vel)
+            est.update(mean, self.q, self.vel)
             self._imu_sum, self._imu_count = [0.0, 0.0, 0.0], 0
             self._imu_next += period
         for i in range(3):
             self._imu_sum[i] += acc[i]
         self._imu_count += 1
-        if self.estimator.tared:
-            self.swing = list(self.estimator.estimate)
+        if est.tared:
+            self.swing = list(est.estimate)
             self.t_swing = now
 
     @property
