@@ -448,6 +448,36 @@ fn active_bounds_are_respected_and_both_solvers_agree() {
     assert!(worst < 1e-4, "Clarabel and active set differ by {worst}");
 }
 
+/// A fresh copy of a controller that has flown (its QP warm start, its last input) flies
+/// exactly as a controller newly designed on the same model: only the design is shared.
+#[test]
+fn a_fresh_copy_flies_as_a_newly_designed_controller() {
+    let m = model(0.3, 2.0, 4);
+    for solver in [QpSolverKind::Clarabel, QpSolverKind::ActiveSet] {
+        let s = MpcSettings {
+            acc_max: Some(1.0),
+            jerk_max: Some(10.0),
+            solver,
+            ..Default::default()
+        };
+        let fly = |c: &mut MpcController, to: f64| {
+            run_linear(
+                c,
+                &mut LinearPlant::new(&m).unwrap(),
+                &|k| vec![if k > 5 { to } else { 0.0 }],
+                &[0.2],
+                400,
+            )
+        };
+        let mut flown = MpcController::new(&m, s.clone()).unwrap();
+        let (_, _, kinds) = fly(&mut flown, -3.0);
+        assert!(kinds.contains(&TickKind::Constrained), "bound never active");
+        let (copy, _, _) = fly(&mut flown.fresh_copy().unwrap(), 3.0);
+        let (new, _, _) = fly(&mut MpcController::new(&m, s).unwrap(), 3.0);
+        assert_eq!(copy, new, "{solver:?}");
+    }
+}
+
 #[test]
 fn long_horizon_first_move_approaches_the_dlqr_gain() {
     let m = model(0.2, 1.0, 2);

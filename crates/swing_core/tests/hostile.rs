@@ -110,6 +110,30 @@ fn eigenvalues_are_bounded_and_refuse_non_finite() {
     assert!(eigenvalues(&m).is_none());
     let ev = eigenvalues(&DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -1.0, 0.0])).unwrap();
     assert!(ev.iter().all(|l| (l.norm() - 1.0).abs() < 1e-12));
+    assert!(eigenvalues(&DMatrix::zeros(0, 0)).unwrap().is_empty());
+    // The companion matrix of (z − 0.5)(z + 0.3)(z² − 1.8z + 0.85): its roots, each once.
+    let (a1, a2, a3, a4) = (
+        -1.8 - 0.2,
+        0.85 + 0.36 - 0.15,
+        0.15 * 1.8 - 0.2 * 0.85,
+        0.85 * -0.15,
+    );
+    let c = DMatrix::from_row_slice(
+        4,
+        4,
+        &[
+            -a1, -a2, -a3, -a4, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0,
+        ],
+    );
+    let mut ev = eigenvalues(&c).unwrap();
+    ev.sort_by(|x, y| (x.re, x.im).partial_cmp(&(y.re, y.im)).unwrap());
+    let want = [(-0.3, 0.0), (0.5, 0.0), (0.9, -0.2), (0.9, 0.2)];
+    for (l, (re, im)) in ev.iter().zip(want) {
+        assert!(
+            (l.re - re).abs() < 1e-9 && (l.im - im).abs() < 1e-9,
+            "{ev:?}"
+        );
+    }
 }
 
 /// fuzz/artifacts/identify/crash-*: a rollout of 1e300 s is usize::MAX samples and the

@@ -277,7 +277,8 @@ pub fn swing_mode(
             "swing mode: model is not finite".into(),
         ));
     }
-    let eig = acl.complex_eigenvalues();
+    let eig = crate::linalg::eigenvalues(&acl)
+        .ok_or_else(|| ControlError::Model("swing mode: eigenvalues did not converge".into()))?;
     let ac = acl.map(|x| Complex::new(x, 0.0));
     let mut best: Option<(f64, Complex<f64>)> = None;
     for lam in eig.iter() {

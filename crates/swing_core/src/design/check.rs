@@ -195,33 +195,41 @@ pub fn mpc_step_check(
     step_check_with(&mut mpc, controller, plant, check)
 }
 
-/// Worst figures of `mpc`, designed on `controller`, flying a `step` [m/s] on each of
-/// `plants` behind each of `input_lags` [s]: the one worst-case loop of the offline
-/// selection and the adaptive swap.
+/// Worst figures of `mpc` (designed on `controller`, not flown; each loop flies a fresh
+/// copy), flying a `step` [m/s] on each of `plants` behind each of `input_lags` [s]: the
+/// one worst-case loop of the offline selection and the adaptive swap. The loops are
+/// independent and flown side by side ([`crate::design::parallel`]).
 pub fn worst_step_check(
-    mpc: &mut MpcController,
+    mpc: &MpcController,
     controller: &LinearModel,
     plants: &[LinearModel],
     input_lags: &[f64],
     step: f64,
 ) -> Result<StepCheck, ControlError> {
+    let mut loops = Vec::with_capacity(plants.len() * input_lags.len());
+    for plant in plants {
+        for &input_lag in input_lags {
+            loops.push((plant, input_lag, mpc.fresh_copy()?));
+        }
+    }
+    let checks = crate::design::parallel::map(loops, |(plant, input_lag, mut mpc)| {
+        let check = StepCheckSettings {
+            step,
+            input_lag,
+            ..StepCheckSettings::default()
+        };
+        step_check_with(&mut mpc, controller, plant, &check)
+    });
     let mut worst = StepCheck {
         overshoot: f64::NEG_INFINITY,
         final_error: f64::NEG_INFINITY,
         hold_drift: f64::NEG_INFINITY,
     };
-    for plant in plants {
-        for &input_lag in input_lags {
-            let check = StepCheckSettings {
-                step,
-                input_lag,
-                ..StepCheckSettings::default()
-            };
-            let r = step_check_with(mpc, controller, plant, &check)?;
-            worst.overshoot = worst.overshoot.max(r.overshoot);
-            worst.final_error = worst.final_error.max(r.final_error);
-            worst.hold_drift = worst.hold_drift.max(r.hold_drift);
-        }
+    for r in checks {
+        let r = r?;
+        worst.overshoot = worst.overshoot.max(r.overshoot);
+        worst.final_error = worst.final_error.max(r.final_error);
+        worst.hold_drift = worst.hold_drift.max(r.hold_drift);
     }
     Ok(worst)
 }

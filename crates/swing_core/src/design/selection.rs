@@ -323,17 +323,6 @@ pub struct Selection {
     pub checked: Vec<CheckedCandidate>,
 }
 
-/// Worst figures of an MPC designed on `model` over every plant and input lag.
-fn worst_check(
-    model: &LinearModel,
-    mpc_settings: &MpcSettings,
-    plants: &[LinearModel],
-    settings: &SelectionSettings,
-) -> Result<StepCheck, ControlError> {
-    let mut mpc = MpcController::new(model, mpc_settings.clone())?;
-    worst_step_check(&mut mpc, model, plants, &settings.input_lags, settings.step)
-}
-
 /// Pick from `search` (run on `train`/`test` with `identify`) the model to fly an MPC with
 /// `mpc_settings` on, checking each candidate against the white-box `plant` of the flight
 /// and, when given, first on the vehicle's `twin`.
@@ -395,16 +384,19 @@ pub fn select_for_control(
     let mut verdicts = std::collections::HashMap::new();
     let mut checked: Vec<CheckedCandidate> = Vec::new();
     // One candidate's figures: the twin's step flight, then the linear plants, then the
-    // twin's hold, each only when the one before settled.
+    // twin's hold (the step flight held on), each only when the one before settled. The
+    // MPC is designed once; every flight flies a fresh copy of it.
     let evaluate =
         |model: &LinearModel, twin: Option<&TwinPlant>| -> Result<Evaluation, ControlError> {
-            let flight = match twin {
-                Some(tw) => Some(tw.fly(model, mpc_settings)?),
+            let mpc = MpcController::new(model, mpc_settings.clone())?;
+            let step = match twin {
+                Some(tw) => Some(tw.fly_with(mpc.fresh_copy()?)?),
                 None => None,
             };
+            let flight = step.as_ref().map(|s| s.flight);
             let on_twin = flight.is_none_or(|f| settings.twin_bounds.admit(&f, &settings.bounds));
             let worst = if on_twin {
-                worst_check(model, mpc_settings, &plants, settings)?
+                worst_step_check(&mpc, model, &plants, &settings.input_lags, settings.step)?
             } else {
                 StepCheck {
                     overshoot: f64::NAN,
@@ -413,8 +405,8 @@ pub fn select_for_control(
                 }
             };
             let mut settled = on_twin && settings.bounds.admit(&worst);
-            let hold = match twin {
-                Some(tw) if settled => Some(tw.hold(model, mpc_settings)?),
+            let hold = match (twin, step) {
+                (Some(tw), Some(step)) if settled => Some(tw.hold_on(step, mpc)?),
                 _ => None,
             };
             if let Some(h) = &hold {

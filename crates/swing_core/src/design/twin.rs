@@ -6,6 +6,7 @@ use crate::config::{positive, ConfigError};
 use crate::control::{ControlError, MpcController, MpcSettings};
 use crate::design::check::{overshoot, swing_iae, StepCheck, FINAL_SPAN};
 use crate::plant::{PayloadKind, WindParams};
+use crate::sensors::{ImuParams, SwingSource};
 use crate::sim::{NoiseParams, Scenario, SetpointEntry, SimError, Simulator};
 use crate::sysid::LinearModel;
 
@@ -133,6 +134,12 @@ impl TwinPlant {
         sc.payload.mass = wb.payload_mass;
         sc.payload.length = wb.length;
         sc.payload.events.clear();
+        // The IMU feeds back only through the swing estimator: on any other swing source
+        // its noise and vibration change nothing the twin measures, and drawing them is
+        // the largest part of a physics step.
+        if sc.sensors.swing != SwingSource::Imu {
+            sc.sensors.imu = ImuParams::ideal();
+        }
         // The flight's own swing-sensor noise: a model whose MPC feeds it into the
         // velocity wanders off the setpoint in flight, and on the twin too.
         sc.noise.swing_std = wb.swing_noise.unwrap_or(0.0);
@@ -177,7 +184,7 @@ impl TwinPlant {
         let mut pid = Simulator::new(sc.clone())
             .map_err(|e| ConfigError::new("twin", format!("twin scenario: {e}")))?;
         let pid = match pid.run_to_end() {
-            Ok(()) => measure(&pid, step, axes)
+            Ok(()) => measure(&pid, usize::MAX, step, axes)
                 .map_err(|e| ConfigError::new("twin", format!("PX4 alone on the twin: {e}")))?,
             Err(_) => TwinFlight::diverged(),
         };
@@ -208,34 +215,90 @@ impl TwinPlant {
         model: &LinearModel,
         settings: &MpcSettings,
     ) -> Result<TwinFlight, ControlError> {
-        match self.run(&self.scenario, model, settings)? {
-            Some(sim) => measure(&sim, self.step, self.axes),
-            None => Ok(TwinFlight::diverged()),
-        }
+        Ok(self
+            .fly_with(MpcController::new(model, settings.clone())?)?
+            .flight)
     }
 
-    /// Fly the MPC of `model` with `settings` on the step held for [`TWIN_HOLD_SECONDS`],
-    /// with the sensor noise and, when there is some, again without it (the same draws
-    /// otherwise): what the noise alone does to the velocity, and whether the flight
-    /// without it stays on the setpoint.
+    /// Fly the controller `mpc` (not flown before) on the step, and keep the flight to be
+    /// held on ([`Self::hold_on`]).
+    pub fn fly_with(&self, mpc: MpcController) -> Result<TwinStep, ControlError> {
+        let mut sc = self.scenario.clone();
+        sc.duration = TWIN_HOLD_SECONDS;
+        let mut sim = self.start(sc, mpc)?;
+        // One physics step past the step flight's end, so that its last row is logged: the
+        // rows so far are the step flight's, draw for draw.
+        let until = TWIN_CHECK_SECONDS + self.scenario.physics_dt;
+        match sim.advance(until) {
+            Ok(()) if sim.fallback_reason().is_none() => {}
+            Ok(()) | Err(SimError::Diverged { .. }) => {
+                return Ok(TwinStep {
+                    flight: TwinFlight::diverged(),
+                    sim: None,
+                })
+            }
+            Err(e) => return Err(sim_error(e)),
+        }
+        let rows = column(&sim, "t")?.partition_point(|&x| x <= TWIN_CHECK_SECONDS + 1e-9);
+        let flight = measure(&sim, rows, self.step, self.axes)?;
+        Ok(TwinStep {
+            flight,
+            sim: Some(sim),
+        })
+    }
+
+    /// Fly the MPC of `model` with `settings` on the step held for [`TWIN_HOLD_SECONDS`]
+    /// ([`Self::hold_on`] after [`Self::fly_with`]).
     pub fn hold(
         &self,
         model: &LinearModel,
         settings: &MpcSettings,
     ) -> Result<TwinHold, ControlError> {
-        let mut sc = self.scenario.clone();
-        sc.duration = TWIN_HOLD_SECONDS;
-        let Some(noisy) = self.run(&sc, model, settings)? else {
+        let mpc = MpcController::new(model, settings.clone())?;
+        let step = self.fly_with(mpc.fresh_copy()?)?;
+        self.hold_on(step, mpc)
+    }
+
+    /// Hold the step flight `step` on to [`TWIN_HOLD_SECONDS`] with the sensor noise and,
+    /// when there is some, fly the controller `mpc` (of the same design, not flown before)
+    /// again without it (the same draws otherwise): what the noise alone does to the
+    /// velocity, and whether the flight without it stays on the setpoint.
+    pub fn hold_on(&self, step: TwinStep, mpc: MpcController) -> Result<TwinHold, ControlError> {
+        let Some(mut noisy) = step.sim else {
             return Ok(TwinHold::diverged());
         };
-        let clean = if sc.noise.swing_std > 0.0 {
+        let quiet = (self.scenario.noise.swing_std > 0.0).then(|| {
+            let mut sc = self.scenario.clone();
+            sc.duration = TWIN_HOLD_SECONDS;
             sc.noise.swing_std = 0.0;
-            match self.run(&sc, model, settings)? {
-                Some(sim) => Some(sim),
-                None => return Ok(TwinHold::diverged()),
-            }
-        } else {
-            None
+            sc
+        });
+        // The two flights are independent: the one without noise flies on another core.
+        let (held, clean) = crate::design::parallel::join(
+            || match noisy.run_to_end() {
+                Ok(()) => Ok(noisy.fallback_reason().is_none()),
+                Err(SimError::Diverged { .. }) => Ok(false),
+                Err(e) => Err(sim_error(e)),
+            },
+            move || -> Result<Option<Option<Vec<Vec<f64>>>>, ControlError> {
+                let Some(sc) = quiet else {
+                    return Ok(None);
+                };
+                let Some(sim) = self.finish(self.start(sc, mpc)?)? else {
+                    return Ok(Some(None));
+                };
+                let velocities = ["vn", "ve"]
+                    .iter()
+                    .take(self.axes)
+                    .map(|name| column(&sim, name).map(<[f64]>::to_vec))
+                    .collect::<Result<Vec<_>, _>>()?;
+                Ok(Some(Some(velocities)))
+            },
+        );
+        let clean = match (held?, clean?) {
+            (false, _) | (_, Some(None)) => return Ok(TwinHold::diverged()),
+            (true, Some(Some(v))) => Some(v),
+            (true, None) => None,
         };
         let t = column(&noisy, "t")?;
         let late = t.partition_point(|&x| x < TWIN_HOLD_SECONDS - LATE_SPAN);
@@ -243,10 +306,10 @@ impl TwinPlant {
             wander: 0.0,
             late_error: 0.0,
         };
-        for v_name in ["vn", "ve"].iter().take(self.axes) {
+        for (axis, v_name) in ["vn", "ve"].iter().take(self.axes).enumerate() {
             let v = column(&noisy, v_name)?;
             let v0 = match &clean {
-                Some(c) => column(c, v_name)?,
+                Some(c) => &c[axis][..],
                 None => v,
             };
             if v0.len() != v.len() {
@@ -266,16 +329,9 @@ impl TwinPlant {
         Ok(out)
     }
 
-    /// `scenario` flown to its end by the MPC of `model`; `None` when it diverged or fell
-    /// back to PX4.
-    fn run(
-        &self,
-        scenario: &Scenario,
-        model: &LinearModel,
-        settings: &MpcSettings,
-    ) -> Result<Option<Simulator>, ControlError> {
+    /// A simulator of `scenario` with `mpc` attached, not yet flown.
+    fn start(&self, scenario: Scenario, mpc: MpcController) -> Result<Simulator, ControlError> {
         use crate::control::SwingController;
-        let mpc = MpcController::new(model, settings.clone())?;
         if mpc.axes() != self.axes {
             return Err(ControlError::Model(format!(
                 "the twin flies {} axes, the controller {}",
@@ -283,10 +339,15 @@ impl TwinPlant {
                 mpc.axes()
             )));
         }
-        let mut sim = Simulator::new(scenario.clone()).map_err(sim_error)?;
+        let mut sim = Simulator::new(scenario).map_err(sim_error)?;
         // The check measures the control law, not the machine it runs on: no tick budget.
         sim.attach_controller(Box::new(mpc), 0.0, f64::MAX)
             .map_err(sim_error)?;
+        Ok(sim)
+    }
+
+    /// `sim` flown to its end; `None` when it diverged or fell back to PX4.
+    fn finish(&self, mut sim: Simulator) -> Result<Option<Simulator>, ControlError> {
         match sim.run_to_end() {
             Ok(()) => {}
             Err(SimError::Diverged { .. }) => return Ok(None),
@@ -294,6 +355,14 @@ impl TwinPlant {
         }
         Ok(sim.fallback_reason().is_none().then_some(sim))
     }
+}
+
+/// A twin step flight ([`TwinPlant::fly_with`]), its simulator kept to hold the step on.
+pub struct TwinStep {
+    /// The step flight's figures.
+    pub flight: TwinFlight,
+    /// The flight at the step flight's end (`None`: it diverged or fell back to PX4).
+    sim: Option<Simulator>,
 }
 
 /// The column `name` of the finished flight `sim`.
@@ -304,8 +373,14 @@ fn column<'a>(sim: &'a Simulator, name: &str) -> Result<&'a [f64], ControlError>
 }
 
 /// Figures of the finished twin step flight `sim` (a `step` [m/s] on `axes` axes).
-fn measure(sim: &Simulator, step: f64, axes: usize) -> Result<TwinFlight, ControlError> {
-    let column = |name: &str| column(sim, name);
+/// Only the first `rows` rows count (the step flight's, of a flight held on).
+fn measure(
+    sim: &Simulator,
+    rows: usize,
+    step: f64,
+    axes: usize,
+) -> Result<TwinFlight, ControlError> {
+    let column = |name: &str| column(sim, name).map(|c| &c[..rows.min(c.len())]);
     let t = column("t")?;
     let mut out = TwinFlight {
         check: StepCheck {
@@ -433,6 +508,32 @@ mod tests {
         assert!(bounds.damps(&f, &pid), "{f:?} vs {pid:?}");
         assert!(f.swing_excess < 0.3 * pid.swing_excess, "{f:?} vs {pid:?}");
         assert!(f.settle < pid.settle, "{f:?} vs {pid:?}");
+    }
+
+    /// The step flight is measured on the first 20 s of the flight the hold goes on with:
+    /// draw for draw the flight of a 20 s scenario, so holding on changes no figure.
+    #[test]
+    fn a_step_flight_held_on_is_the_step_flight_flown_alone() {
+        let (tpl, mut plant, _) = builtin_twin();
+        plant.diagnostics.whitebox.as_mut().unwrap().swing_noise = Some(2e-4);
+        let sc = Scenario::builtin("training").unwrap();
+        let twin = TwinPlant::new(&sc, &plant, 2.0, 1).unwrap();
+        let settings = MpcSettings::default();
+        let mpc = MpcController::new(&tpl, settings.clone()).unwrap();
+        let held = twin.fly_with(mpc.fresh_copy().unwrap()).unwrap();
+        let alone = twin
+            .finish(
+                twin.start(twin.scenario.clone(), mpc.fresh_copy().unwrap())
+                    .unwrap(),
+            )
+            .unwrap()
+            .unwrap();
+        assert_eq!(alone.time(), TWIN_CHECK_SECONDS);
+        assert_eq!(held.flight, measure(&alone, usize::MAX, 2.0, 1).unwrap());
+        assert!(held.flight.settle < 6.0, "{:?}", held.flight);
+        let hold = twin.hold_on(held, mpc).unwrap();
+        assert!(hold.wander > 0.0, "{hold:?}");
+        assert_eq!(hold, twin.hold(&tpl, &settings).unwrap());
     }
 
     #[test]

@@ -20,6 +20,7 @@
 //! Every solution is checked: relative residual of the equation ≤ 1e-8 and a stable closed
 //! loop (Re λ(A − BK) < 0, resp. |λ(A − BK)| < 1), otherwise [`LinalgError::NoSolution`].
 
+use faer::linalg::solvers::Solve;
 use nalgebra::DMatrix;
 
 use super::{eigenvalues, expm, LinalgError, EXPM_MAX_ENTRY};
@@ -37,6 +38,23 @@ pub struct RiccatiSolution {
 
 /// Accepted relative Riccati residual.
 const RESIDUAL_TOL: f64 = 1e-8;
+
+/// `m` as a faer matrix.
+fn to_faer(m: &DMatrix<f64>) -> faer::Mat<f64> {
+    faer::Mat::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)])
+}
+
+/// (M + Mᵀ)/2 in place, for a faer matrix.
+fn symmetrize_faer(m: &mut faer::Mat<f64>) {
+    let n = m.nrows();
+    for i in 0..n {
+        for j in (i + 1)..n {
+            let v = 0.5 * (m[(i, j)] + m[(j, i)]);
+            m[(i, j)] = v;
+            m[(j, i)] = v;
+        }
+    }
+}
 
 fn symmetrize(m: &mut DMatrix<f64>) {
     let n = m.nrows();
@@ -231,11 +249,14 @@ pub fn dare_with_cross(
     let abar = a - b * &rinv * cross.transpose();
     let mut qbar = q - cross * &rinv * cross.transpose();
     symmetrize(&mut qbar);
-    let id = DMatrix::<f64>::identity(n, n);
-    let mut ak = abar.clone();
+    // The doubling runs in faer: its blocked LU and products are several times nalgebra's
+    // on the 100–200-state augmented models of the MPC's Kalman filter.
     let mut gk = b * &rinv * b.transpose();
     symmetrize(&mut gk);
-    let mut hk = qbar.clone();
+    let mut ak = to_faer(&abar);
+    let mut gk = to_faer(&gk);
+    let mut hk = to_faer(&qbar);
+    let id = faer::Mat::<f64>::identity(n, n);
     let fail = |why: &str| {
         LinalgError::NoSolution(format!(
             "DARE: {why} (check stabilisability of (A, B) and detectability of (A, Q))"
@@ -244,16 +265,20 @@ pub fn dare_with_cross(
     let mut converged = false;
     for _ in 0..200 {
         let w = &id + &gk * &hk;
-        let lu = w.lu();
-        let y1 = lu.solve(&ak).ok_or_else(|| fail("I + GH is singular"))?;
-        let y2 = lu.solve(&gk).ok_or_else(|| fail("I + GH is singular"))?;
+        let lu = w.partial_piv_lu();
+        let y1 = lu.solve(&ak);
+        let y2 = lu.solve(&gk);
+        // A singular I + GH leaves non-finite solutions (faer's LU does not refuse it).
+        if !(y1.is_all_finite() && y2.is_all_finite()) {
+            return Err(fail("I + GH is singular"));
+        }
         let a_next = &ak * &y1;
-        let mut g_next = &gk + &ak * y2 * ak.transpose();
+        let mut g_next = &gk + &ak * &y2 * ak.transpose();
         let mut h_next = &hk + ak.transpose() * &hk * &y1;
-        symmetrize(&mut g_next);
-        symmetrize(&mut h_next);
-        let change = (&h_next - &hk).norm();
-        let scale = h_next.norm();
+        symmetrize_faer(&mut g_next);
+        symmetrize_faer(&mut h_next);
+        let change = (&h_next - &hk).norm_l2();
+        let scale = h_next.norm_l2();
         if !scale.is_finite() {
             return Err(fail("doubling diverged"));
         }
@@ -268,6 +293,7 @@ pub fn dare_with_cross(
     if !converged {
         return Err(fail("doubling did not converge"));
     }
+    let hk = DMatrix::from_fn(n, n, |i, j| hk[(i, j)]);
     let p = hk;
     let bt_p = b.transpose() * &p;
     let s = r + &bt_p * b;

@@ -449,15 +449,8 @@ impl LinearModel {
     }
 }
 
-/// Spectral radius of a square matrix via faer's eigenvalues.
+/// Spectral radius of a square matrix ([`crate::linalg::spectral_radius`]).
 pub fn spectral_radius(a: &DMatrix<f64>) -> Result<f64, SysidError> {
-    let n = a.nrows();
-    if n == 0 {
-        return Ok(0.0);
-    }
-    let fa = faer::Mat::<f64>::from_fn(n, n, |i, j| a[(i, j)]);
-    let ev = fa
-        .eigenvalues()
-        .map_err(|e| model(format!("eigenvalues did not converge: {e:?}")))?;
-    Ok(ev.iter().map(|z| z.re.hypot(z.im)).fold(0.0_f64, f64::max))
+    crate::linalg::spectral_radius(a)
+        .ok_or_else(|| model("eigenvalues did not converge (or the matrix is not finite)"))
 }

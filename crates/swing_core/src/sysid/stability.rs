@@ -137,10 +137,8 @@ impl Screen {
         if k == 0 {
             return Ok(self.verdict(0.0, 0.0, None));
         }
-        let fa = faer::Mat::<f64>::from_fn(k, k, |i, j| a[(i, j)]);
-        let ev = fa
-            .eigenvalues()
-            .map_err(|e| model(format!("eigenvalues did not converge: {e:?}")))?;
+        let ev = crate::linalg::eigenvalues(a)
+            .ok_or_else(|| model("eigenvalues did not converge (or the matrix is not finite)"))?;
         let abs: Vec<f64> = ev.iter().map(|z| z.re.hypot(z.im)).collect();
         let rho = abs.iter().copied().fold(0.0_f64, f64::max);
         let plain = self.verdict(rho, rho, None);

@@ -508,6 +508,43 @@ impl MpcController {
         })
     }
 
+    /// A controller of the same design that has not flown yet, as [`Self::new`] returns it
+    /// (with the bounds now in force): the Kalman gain and the condensed QP, the costly
+    /// part of a design, are copied; the QP solver is set up afresh, so nothing of this
+    /// controller's flight (its solver's warm start, its last input) carries over.
+    pub fn fresh_copy(&self) -> Result<Self, ControlError> {
+        let backend = qp_backend(
+            &self.cond.h,
+            self.bounds,
+            self.settings.solver,
+            self.m,
+            self.cond.nc,
+        )?;
+        Ok(Self {
+            settings: self.settings.clone(),
+            dt: self.dt,
+            n: self.n,
+            nz: self.nz,
+            m: self.m,
+            sources: self.sources.clone(),
+            is: self.is.clone(),
+            aug: self.aug.clone(),
+            cond: self.cond.clone(),
+            kf: self.kf.clone(),
+            bounds: self.bounds,
+            backend,
+            y: DVector::zeros(self.y.len()),
+            u_prev: DVector::zeros(self.m),
+            r: DVector::zeros(self.m),
+            u_unc: DVector::zeros(self.u_unc.len()),
+            u_sol: DVector::zeros(self.u_sol.len()),
+            f: DVector::zeros(self.f.len()),
+            xi_last: DVector::zeros(self.xi_last.len()),
+            pred: DVector::zeros(self.pred.len()),
+            initialized: false,
+        })
+    }
+
     /// The settings in use.
     pub fn settings(&self) -> &MpcSettings {
         &self.settings

@@ -115,9 +115,9 @@ impl Synthesizer {
                     .map_err(|e| e.to_string())?,
             );
         }
-        let mut checked = MpcController::new(&bare, self.mpc.clone()).map_err(|e| e.to_string())?;
+        let checked = MpcController::new(&bare, self.mpc.clone()).map_err(|e| e.to_string())?;
         let worst = worst_step_check(
-            &mut checked,
+            &checked,
             &bare,
             &plants,
             &self.settings.input_lags,
