@@ -121,3 +121,63 @@ def test_the_offboard_node_estimates_the_swing_from_highres_imu_as_a_ulog_is_rea
     np.testing.assert_allclose(online[on_grid + 1], batch[on_grid], rtol=0, atol=1e-12)
     late = tt > 6.0
     assert np.max(np.abs(batch[late])) == pytest.approx(theta0, rel=0.03)
+
+
+def test_a_ulog_with_the_cable_sensor_on_adc_channels_loads_into_the_simulators_world_angles(
+    tmp_path, cli
+):
+    """The thesis's rig: two potentiometers on the airframe read as ADC channels, logged by
+    PX4 as ``adc_report``. A training flight with that sensor (the vehicle tilting through
+    its random steps), written as a ULog with only the counts, loads into the world-frame
+    angles the simulator logged; without the attitude the body angles would be off by the
+    tilt."""
+    from swingrt.errors import ConfigError, DataError
+    from swingrt.io import load_flight
+    from swingrt.testing import write_ulog
+
+    sensor = {"channels": [10, 11], "gain": [2200.0, 2500.0], "zero": [2000.0, 2100.0]}
+    flight = swingrt.collect(
+        {
+            "sensors": {"swing": "body", "body": sensor},
+            "random_steps": {"axes": "ne"},
+            "setpoints": [{"t": 0.0, "vn": 0.0, "ve": 0.0}],
+        },
+        duration=60.0,
+        seed=3,
+    )
+    assert np.isfinite(flight["adc_x"]).all()
+    path = tmp_path / "rig.ulg"
+    write_ulog(flight.columns, path, adc_channels=(10, 11))
+    data = load_flight(path, ulog_swing={"topic": "adc_report"}, body=sensor)
+    assert data.meta["swing_source"] == "body"
+    assert swingrt.sysid.swing_source(data) == "body"
+    t = np.asarray(data["t"]) + float(flight.t[0])
+    err = [
+        np.asarray(data[f"swing_{a}"]) - np.interp(t, flight.t, flight[f"swing_{a}"])
+        for a in ("n", "e")
+    ]
+    worst = max(float(np.max(np.abs(e))) for e in err)
+    assert worst < 1e-4, worst
+    assert min(np.ptp(flight[f"swing_{a}"]) for a in ("n", "e")) > 0.2
+    # The body angles alone (calibrated counts) miss the vehicle's tilt.
+    beta_x = (np.asarray(data["adc_x"]) - 2000.0) / 2200.0
+    assert np.max(np.abs(beta_x - np.asarray(data["swing_n"]))) > 0.1
+    # A sensor described wrongly is named: a channel the log lacks, a bad field.
+    with pytest.raises(
+        DataError, match=r"no channel 9 .*channels logged: \[0, 1, 2, 4, 5, 10, 11\]"
+    ):
+        load_flight(path, ulog_swing={"topic": "adc_report"}, body={"channels": [9, 11]})
+    with pytest.raises(ConfigError, match="body.gains"):
+        load_flight(path, ulog_swing={"topic": "adc_report"}, body={"gains": [1.0, 1.0]})
+    # From the command line: the sensor of the vehicle's description (--twin).
+    twin = tmp_path / "rig.toml"
+    twin.write_text(
+        "[sensors.body]\nchannels = [10, 11]\ngain = [2200.0, 2500.0]\nzero = [2000.0, 2100.0]\n"
+    )
+    r = cli(
+        "identify", path, "--ulog-swing-topic", "adc_report", "--twin", twin,
+        "--delays", "10", "--rank", "12", "-o", tmp_path / "m.json",
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    model = swingrt.LinearModel.load(tmp_path / "m.json")
+    assert model.diagnostics["swing_source"] == "body"

@@ -30,6 +30,7 @@ __all__ = [
     "TrackingMpc",
     "__version__",
     "adaptive_timing",
+    "body_swing",
     "care",
     "check_settings",
     "dare",
@@ -131,6 +132,11 @@ def estimate_swing(
     q: npt.NDArray[np.float64],
     vel: npt.NDArray[np.float64],
     settings: dict[str, Any] | None = None,
+) -> npt.NDArray[np.float64]: ...
+def body_swing(
+    counts: npt.NDArray[np.float64],
+    q: npt.NDArray[np.float64],
+    sensor: dict[str, Any] | None = None,
 ) -> npt.NDArray[np.float64]: ...
 
 @final

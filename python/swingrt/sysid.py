@@ -175,8 +175,8 @@ def resample(
 def swing_source(data: Any) -> str:
     """Where a flight's swing comes from: ``imu`` when it has no swing column with a value
     (absent or all NaN) but a finite IMU estimate ``swing_est_n`` for every sample, else the
-    flight's scenario's ``sensors.swing`` (``sensor`` or ``body``; ``sensor`` when the
-    flight does not say)."""
+    flight's ``swing_source`` (a ULog read from ``adc_report``) or its scenario's
+    ``sensors.swing`` (``sensor`` or ``body``; ``sensor`` when the flight does not say)."""
     cols = _columns(data)
     sw = cols.get("swing_n")
     if sw is None or not np.isfinite(np.asarray(sw, dtype=float)).any():
@@ -185,7 +185,8 @@ def swing_source(data: Any) -> str:
             return "imu"
     meta = getattr(data, "meta", None) or {}
     sensors = (meta.get("scenario") or {}).get("sensors") or {}
-    src = sensors.get("swing", "sensor")
+    # A ULog read from its cable sensor's ADC says so itself (swingrt.io.ulog).
+    src = meta.get("swing_source") or sensors.get("swing", "sensor")
     return src if src in ("sensor", "body") else "sensor"
 
 

@@ -24,7 +24,18 @@ from swingrt.io.ulog import euler_to_quat
 __all__ = ["PDSwingDamper", "write_ulog"]
 
 _ULOG_MAGIC = b"ULog\x01\x12\x35"
-_ULOG_TYPES = {"uint64_t": "Q", "float": "f", "char": "c", "uint8_t": "B"}
+_ULOG_TYPES = {
+    "uint64_t": "Q",
+    "float": "f",
+    "char": "c",
+    "uint8_t": "B",
+    "int16_t": "h",
+    "int32_t": "i",
+    "uint32_t": "I",
+}
+#: Slots of ``adc_report``'s 12 channels: the flight controller's own channels around the
+#: cable sensor's two (written into slots 3 and 7), unused slots -1, as PX4 logs them.
+_ADC_OTHER_CHANNELS = {0: 0, 1: 1, 2: 2, 4: 4, 5: 5}
 
 
 class _ULogWriter:
@@ -75,8 +86,13 @@ def write_ulog(
     rates_hz: Mapping[str, float] | None = None,
     swing_scale: float = 1.0,
     swing_offset: float = 0.0,
+    adc_channels: tuple[int, int] | None = None,
 ) -> None:
     """Write a trace as a PX4 ULog with the topics :func:`load_flight` reads.
+
+    With ``adc_channels`` (the thesis's rig: a cable sensor on the airframe) the swing is
+    written as the trace's ``adc_x adc_y`` counts on those channel ids of ``adc_report``
+    (12 slots, the flight controller's own channels beside them) instead of a DEBUG_VECT.
 
     Topics: ``vehicle_local_position`` (x, y, z, vx, vy, vz), ``vehicle_local_position_setpoint``
     (vx, vy, vz and ``acceleration[3]``, or ``acc_x/acc_y/acc_z`` with ``old_spelling``),
@@ -92,7 +108,9 @@ def write_ulog(
         "debug_vect": 40.0,
     }
     rates.update(rates_hz or {})
-    need = ["t", "pn", "pe", "pd", "vn", "ve", "vd", "roll", "pitch", "yaw", "swing_n", "swing_e"]
+    rates.setdefault("adc_report", 100.0)
+    swing_cols = ["adc_x", "adc_y"] if adc_channels is not None else ["swing_n", "swing_e"]
+    need = ["t", "pn", "pe", "pd", "vn", "ve", "vd", "roll", "pitch", "yaw", *swing_cols]
     need += ["acc_sp_n", "acc_sp_e", "acc_sp_d"]
     require(trace_columns, need, "write_ulog")
     t = np.asarray(trace_columns["t"], dtype=float)
@@ -131,6 +149,16 @@ def write_ulog(
             ("float", 0, "z"),
         ],
     }
+    if adc_channels is not None:
+        del formats["debug_vect"]
+        formats["adc_report"] = [
+            ("uint64_t", 0, "timestamp"),
+            ("uint32_t", 0, "device_id"),
+            ("int16_t", 12, "channel_id"),
+            ("int32_t", 12, "raw_data"),
+            ("uint32_t", 0, "resolution"),
+            ("float", 0, "v_ref"),
+        ]
     rows: list[tuple[int, str, list]] = []  # (timestamp_us, topic, values)
 
     ts, us = sample(rates["vehicle_local_position"])
@@ -162,13 +190,29 @@ def write_ulog(
         (int(u), "vehicle_attitude", [int(u)] + [float(c[i]) for c in q]) for i, u in enumerate(us)
     ]
 
-    ts, us = sample(rates["debug_vect"])
-    sn = (np.interp(ts, t, col("swing_n")) - swing_offset) / swing_scale
-    se = (np.interp(ts, t, col("swing_e")) - swing_offset) / swing_scale
-    rows += [
-        (int(u), "debug_vect", [int(u), b"SWING", float(sn[i]), float(se[i]), 0.0])
-        for i, u in enumerate(us)
-    ]
+    if adc_channels is None:
+        ts, us = sample(rates["debug_vect"])
+        sn = (np.interp(ts, t, col("swing_n")) - swing_offset) / swing_scale
+        se = (np.interp(ts, t, col("swing_e")) - swing_offset) / swing_scale
+        rows += [
+            (int(u), "debug_vect", [int(u), b"SWING", float(sn[i]), float(se[i]), 0.0])
+            for i, u in enumerate(us)
+        ]
+    else:
+        # The ADC is sampled, not interpolated: each row holds the counts of the trace's
+        # latest sample (they are integers on the converter).
+        ts, us = sample(rates["adc_report"])
+        k = np.clip(np.searchsorted(t, ts + 1e-12, side="right") - 1, 0, len(t) - 1)
+        counts = (col("adc_x")[k], col("adc_y")[k])
+        channel_ids = [-1] * 12
+        for slot, ch in _ADC_OTHER_CHANNELS.items():
+            if ch not in adc_channels:
+                channel_ids[slot] = ch
+        channel_ids[3], channel_ids[7] = adc_channels
+        for i, u in enumerate(us):
+            raw = [1000 + 10 * slot for slot in range(12)]
+            raw[3], raw[7] = int(counts[0][i]), int(counts[1][i])
+            rows.append((int(u), "adc_report", [int(u), 1, *channel_ids, *raw, 4096, 3.3]))
     rows.sort(key=lambda r: r[0])
 
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:

@@ -1,11 +1,12 @@
 //! Bindings of `swing_core::sensors`: the swing estimated from the vehicle's own IMU, one
-//! sample at a time (the offboard node) or over a whole log (a PX4 ULog).
+//! sample at a time (the offboard node) or over a whole log (a PX4 ULog), and the swing of a
+//! cable sensor on the airframe read from its ADC counts.
 
 use nalgebra::{Matrix3, Quaternion};
 use numpy::{IntoPyArray, PyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use swing_core::plant::dynamics::rotation;
-use swing_core::sensors::{ImuSwingEstimator, ImuSwingSettings};
+use swing_core::sensors::{BodySensorParams, ImuSwingEstimator, ImuSwingSettings};
 
 use crate::convert::{self, data_err};
 use crate::errors::to_py;
@@ -150,9 +151,57 @@ fn estimate_swing<'py>(
     Ok(out.into_pyarray(py))
 }
 
+/// The world-frame swing (N×2: N, E) [rad] of a cable sensor on the airframe: its ADC
+/// `counts` (N×2, the body x and y potentiometers) through the calibration of `sensor` (a
+/// dict of `BodySensorParams`' fields, a scenario's `[sensors.body]`; None: defaults),
+/// composed with the attitude `q` (N×4, w, x, y, z, body → NED), as the simulator does.
+#[pyfunction]
+#[pyo3(signature = (counts, q, sensor=None))]
+fn body_swing<'py>(
+    py: Python<'py>,
+    counts: &Bound<'py, PyAny>,
+    q: &Bound<'py, PyAny>,
+    sensor: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let p: BodySensorParams = convert::settings(sensor, "body")?;
+    p.validate().map_err(|e| to_py(e.within("body")))?;
+    let counts = convert::array2(counts, "counts")?;
+    let q = convert::array2(q, "q")?;
+    let rows = counts.shape()[0];
+    for (name, a, width) in [("counts", &counts, 2), ("q", &q, 4)] {
+        if a.shape() != [rows, width] {
+            return Err(data_err(format!(
+                "{name} must be {rows}×{width} (got {:?})",
+                a.shape()
+            )));
+        }
+    }
+    let (c, qs) = (counts.as_slice()?, q.as_slice()?);
+    let mut out = numpy::ndarray::Array2::<f64>::zeros((rows, 2));
+    for k in 0..rows {
+        let what = || format!("sample {k}");
+        let ck = [c[2 * k], c[2 * k + 1]];
+        if !ck.iter().all(|x| x.is_finite()) {
+            return Err(data_err(format!(
+                "{}: ADC counts {ck:?} are not finite",
+                what()
+            )));
+        }
+        let rot = attitude(
+            [qs[4 * k], qs[4 * k + 1], qs[4 * k + 2], qs[4 * k + 3]],
+            what,
+        )?;
+        let [n, e] = p.world_swing(&rot, ck);
+        out[[k, 0]] = n;
+        out[[k, 1]] = e;
+    }
+    Ok(out.into_pyarray(py))
+}
+
 /// Register this domain's functions and classes on the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyImuSwingEstimator>()?;
     m.add_function(wrap_pyfunction!(estimate_swing, m)?)?;
+    m.add_function(wrap_pyfunction!(body_swing, m)?)?;
     Ok(())
 }

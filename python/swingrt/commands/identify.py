@@ -66,7 +66,12 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "where a PX4 .ulg holds the swing angles, and their linear calibration "
         "(angle = scale · raw + offset); default: debug_vect rows named SWING, x = north, y = east",
     )
-    g.add_argument("--ulog-swing-topic", metavar="TOPIC", help="uORB topic (default debug_vect)")
+    g.add_argument(
+        "--ulog-swing-topic",
+        metavar="TOPIC",
+        help="uORB topic (default debug_vect); adc_report: a cable sensor on the airframe, "
+        "its channels and calibration from the --twin scenario's [sensors.body]",
+    )
     g.add_argument(
         "--ulog-swing-name", metavar="NAME", help="debug_vect row name to keep (default SWING)"
     )
@@ -129,7 +134,13 @@ def run(args) -> int:
             settings["vehicle_mass"] = float(twin.to_dict()["vehicle"]["mass"])
     with options_named():
         checked = sysid.identify_settings(**settings)
-    data = load_flight(args.data, ulog_swing=_ulog_swing(args))
+    ulog_swing = _ulog_swing(args)
+    body = None
+    on_adc = (ulog_swing or {}).get("topic") == "adc_report"
+    if on_adc and twin is not None and args.twin != "builtin":
+        # The cable sensor on the airframe is part of the vehicle's description.
+        body = twin.to_dict()["sensors"]["body"]
+    data = load_flight(args.data, ulog_swing=ulog_swing, body=body)
     result = None
     if args.search:
         search_opts = {k: v for k, v in checked.items() if k not in ("delays", "rank")}

@@ -151,13 +151,15 @@ def load_flight(
     *,
     ulog_swing: Mapping | None = None,
     estimator: Mapping | None = None,
+    body: Mapping | None = None,
     columns: Iterable[str] | None = None,
 ) -> Trace:
     """Load a flight from ``.parquet``, ``.csv`` or a PX4 ``.ulg`` into raw trace columns.
 
-    ``ulog_swing`` configures the swing sensor topic of a ULog (module doc) and ``estimator``
-    its swing estimated from the IMU (:mod:`swingrt.io.ulog`); both are ignored for the
-    other formats. ``columns``, if given, are checked with :func:`require`.
+    ``ulog_swing`` configures the swing sensor topic of a ULog (module doc), ``estimator``
+    its swing estimated from the IMU and ``body`` its cable sensor on the airframe read from
+    ``adc_report`` (:mod:`swingrt.io.ulog`); all are ignored for the other formats.
+    ``columns``, if given, are checked with :func:`require`.
     Raises :class:`DataError` with one line for an unknown extension, an empty or unreadable
     file, non-increasing time, or (with ``columns``) a missing column or NaN gap.
     """
@@ -178,7 +180,7 @@ def load_flight(
         if suffix == ".ulg":
             from swingrt.io.ulog import load_ulog
 
-            data = load_ulog(p, ulog_swing, estimator)
+            data = load_ulog(p, ulog_swing, estimator, body)
         else:
             data = _load_table(p, suffix)
         _finish_time(data, str(p))

@@ -38,6 +38,15 @@ Flight segment: when ``vehicle_status`` shows OFFBOARD flight of at least 10 s, 
 cropped to the longest such stretch (the training flight flown by the offboard computer;
 boot, take-off and hover around it are not identification data); ``meta["segment"]`` says so.
 
+Cable sensor on the airframe (the thesis's rig, 6.1.2): with ``ulog_swing = {"topic":
+"adc_report"}`` the swing is read from the two potentiometers' ADC channels of
+``adc_report`` (``channel_id[12]`` / ``raw_data[12]``; ``adc_x adc_y`` in counts), each
+through its calibration and composed with ``vehicle_attitude`` into the world-frame
+``swing_n swing_e`` (``_core.body_swing``, the simulator's own rule). ``body`` describes the
+sensor: the fields of a scenario's ``[sensors.body]`` (``channels``, ``calibration_x``,
+``calibration_y``, or ``zero``/``gain``; default: the core's). ``meta["swing_source"]`` is
+then ``"body"``.
+
 Swing sensor: ``ulog_swing = {"topic": "debug_vect", "name": "SWING", "n": "x", "e": "y",
 "scale": 1.0, "offset": 0.0}`` (the default; ``name`` filters the rows of a ``debug_vect``
 topic by its ``name`` field, our DEBUG_VECT convention documented in docs/flying.md).
@@ -147,10 +156,14 @@ def _offboard_segment(status) -> tuple[float, float] | None:
 
 
 def load_ulog(
-    p: Path, ulog_swing: Mapping | None = None, estimator: Mapping | None = None
+    p: Path,
+    ulog_swing: Mapping | None = None,
+    estimator: Mapping | None = None,
+    body: Mapping | None = None,
 ) -> Trace:
     """Read a PX4 ULog into trace columns on the local-position timeline (module doc);
-    ``estimator`` sets the swing estimate from the IMU (``ImuSwingSettings`` fields)."""
+    ``estimator`` sets the swing estimate from the IMU (``ImuSwingSettings`` fields),
+    ``body`` the cable sensor on the airframe read from ``adc_report``."""
     try:
         from pyulog import ULog
     except ImportError:  # pragma: no cover - pyulog is a declared dependency
@@ -173,7 +186,7 @@ def load_ulog(
         raise DataError(f"{p}: not a readable ULog file ({exc})", path=p) from None
 
     try:
-        return _trace_from_ulog(p, log, swing, explicit_swing, estimator)
+        return _trace_from_ulog(p, log, swing, explicit_swing, estimator, body)
     except (DataError, ConfigError):
         raise
     except (KeyError, IndexError, ValueError, TypeError, OverflowError) as exc:
@@ -184,7 +197,12 @@ def load_ulog(
 
 
 def _trace_from_ulog(
-    p: Path, log: Any, swing: dict, explicit_swing: bool, estimator: Mapping | None = None
+    p: Path,
+    log: Any,
+    swing: dict,
+    explicit_swing: bool,
+    estimator: Mapping | None = None,
+    body: Mapping | None = None,
 ) -> Trace:
     """The trace columns of a parsed ULog (see :func:`load_ulog`)."""
     topics: dict[str, list] = {}
@@ -278,8 +296,14 @@ def _trace_from_ulog(
 
     st = topic(swing["topic"])
     swing_why = None
+    on_body = swing["topic"] == ADC_TOPIC
     if st is None:
         swing_why = f"ULog has no {swing['topic']} topic (swing sensor)"
+    elif on_body:
+        if att is None:
+            swing_why = "the cable sensor's body angles need vehicle_attitude"
+        else:
+            swing_why = _adc_counts(st, body, sources)
     else:
         t_sw, fsw = st
         if swing.get("name"):
@@ -352,7 +376,50 @@ def _trace_from_ulog(
         q = np.stack([out.pop(f"_q{i}") for i in range(4)])
         q /= np.linalg.norm(q, axis=0)
         out["roll"], out["pitch"], out["yaw"] = quat_to_euler(*q)
+        if on_body and "adc_x" in out:
+            from swingrt import _core
+
+            counts = np.column_stack([out["adc_x"], out["adc_y"]])
+            world = _core.body_swing(counts, np.ascontiguousarray(q.T), dict(body or {}))
+            out["swing_n"], out["swing_e"] = world[:, 0], world[:, 1]
+            out.meta["swing_source"] = "body"
+            out.meta["body_sensor"] = dict(body or {})
     return out
+
+
+#: The uORB topic of the flight controller's ADC, where a cable sensor on the airframe is read.
+ADC_TOPIC = "adc_report"
+
+
+def _adc_counts(st, body: Mapping | None, sources: list) -> str | None:
+    """Add the cable sensor's two ADC channels of ``adc_report`` rows ``st`` to ``sources``
+    as ``adc_x adc_y`` [counts] (NaN where a row lacks the channel); the reason when the
+    log does not have them."""
+    from swingrt import _core
+
+    # The core checks the settings (it names a bad field) and holds the defaults.
+    _core.body_swing(np.zeros((0, 2)), np.zeros((0, 4)), dict(body or {}))
+    sensor = _core.Scenario.builtin("step").to_dict()["sensors"]["body"]
+    sensor.update(body or {})
+    wanted = [int(c) for c in sensor["channels"]]
+    t_adc, f = st
+    slots = [i for i in range(32) if f"channel_id[{i}]" in f and f"raw_data[{i}]" in f]
+    if not slots:
+        return f"{ADC_TOPIC} has no channel_id[]/raw_data[] fields"
+    ids = np.stack([f[f"channel_id[{i}]"].astype(np.int64) for i in slots])
+    raw = np.stack([f[f"raw_data[{i}]"].astype(float) for i in slots])
+    cols = {}
+    for axis, ch in zip(("x", "y"), wanted, strict=True):
+        hit = ids == ch
+        if not hit.any():
+            seen = sorted({int(c) for c in np.unique(ids) if c >= 0})
+            return (
+                f"{ADC_TOPIC} has no channel {ch} (the cable sensor's {axis} potentiometer; "
+                f"channels logged: {seen})"
+            )
+        cols[f"adc_{axis}"] = np.where(hit.any(axis=0), (raw * hit).sum(axis=0), np.nan)
+    sources.append((t_adc, cols))
+    return None
 
 
 def _imu_swing(imu, att, t_pos, fpos, t_base, estimator, t_data_start=None):

@@ -114,6 +114,26 @@ impl BodySensorParams {
             given.clone()
         }
     }
+
+    /// The body angle [rad] of ADC reading `counts` on axis `i` through its calibration.
+    pub fn angle(&self, i: usize, counts: f64) -> f64 {
+        let given = if i == 0 {
+            &self.calibration_x
+        } else {
+            &self.calibration_y
+        };
+        if given.is_empty() {
+            (counts - self.zero[i]) / self.gain[i]
+        } else {
+            polynomial(given, counts)
+        }
+    }
+
+    /// The world-frame swing (swing_n, swing_e) [rad] of the readings `counts` (x, y) under
+    /// attitude `rot` (body → NED): each channel through its calibration, then [`compose`].
+    pub fn world_swing(&self, rot: &Matrix3<f64>, counts: [f64; 2]) -> [f64; 2] {
+        compose(rot, [self.angle(0, counts[0]), self.angle(1, counts[1])])
+    }
 }
 
 /// Evaluate Σ_k c_k·x^k (Horner).
@@ -188,6 +208,21 @@ mod tests {
         assert_eq!(c, 2288.0);
         let back = polynomial(&p.calibration(0), c);
         assert!((back - 0.1).abs() < 0.5 / 2400.0);
+        // One rule, with or without a given polynomial: the same angle.
+        assert!((p.angle(0, c) - back).abs() < 1e-15);
+        let cubic = BodySensorParams {
+            calibration_y: vec![-0.9, 4e-4, 1e-9, -2e-13],
+            ..Default::default()
+        };
+        let want = -0.9 + 4e-4 * c + 1e-9 * c * c - 2e-13 * c * c * c;
+        assert!((cubic.angle(1, c) - want).abs() < 1e-12);
+        let level =
+            crate::plant::dynamics::rotation(&nalgebra::Quaternion::new(1.0, 0.0, 0.0, 0.0));
+        let w = cubic.world_swing(&level, [c, c]);
+        assert!(
+            (w[0] - back).abs() < 1e-12 && (w[1] - want).abs() < 1e-12,
+            "{w:?}"
+        );
         assert_eq!(p.counts(1, 10.0), 4095.0);
         assert_eq!(p.counts(1, -10.0), 0.0);
     }

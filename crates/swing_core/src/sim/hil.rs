@@ -28,7 +28,7 @@ use crate::plant::dynamics::swing_angles;
 use crate::plant::{
     Effects, Model, PayloadKind, PayloadParams, PlantState, StepInput, Wind, GRAVITY,
 };
-use crate::sensors::cable::{body_angles, compose, polynomial};
+use crate::sensors::cable::body_angles;
 use crate::sensors::{Imu, ImuSample, SwingSource};
 
 /// Mean Earth radius used for the local flat-Earth GPS projection [m].
@@ -488,13 +488,8 @@ impl HilPlant {
                 [t[0] + self.swing_noise[0], t[1] + self.swing_noise[1]]
             }
             SwingSource::Body => {
-                let b = &self.sc.sensors.body;
-                let adc = self.adc_counts();
-                let beta = [
-                    polynomial(&b.calibration(0), adc[0]),
-                    polynomial(&b.calibration(1), adc[1]),
-                ];
-                compose(&self.state.rotation(), beta)
+                let rot = self.state.rotation();
+                self.sc.sensors.body.world_swing(&rot, self.adc_counts())
             }
         }
     }

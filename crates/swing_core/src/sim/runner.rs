@@ -22,7 +22,7 @@ use crate::error::{Categorized, Category};
 use crate::mission::{Guidance, MissionEvent};
 use crate::plant::dynamics::swing_angles;
 use crate::plant::{Effects, Model, PayloadKind, PlantState, StepInput, Wind, GRAVITY};
-use crate::sensors::cable::{body_angles, compose, polynomial};
+use crate::sensors::cable::body_angles;
 use crate::sensors::{
     Imu, ImuSample, ImuSwingEstimator, ImuSwingSettings, SwingFilter, SwingSource,
 };
@@ -454,13 +454,7 @@ impl Simulator {
             }
             SwingSource::Body => {
                 let rot = self.state.rotation();
-                let adc = self.adc_counts();
-                let b = &self.sc.sensors.body;
-                let beta = [
-                    polynomial(&b.calibration(0), adc[0]),
-                    polynomial(&b.calibration(1), adc[1]),
-                ];
-                compose(&rot, beta)
+                self.sc.sensors.body.world_swing(&rot, self.adc_counts())
             }
         }
     }
