@@ -59,13 +59,17 @@ pub fn eigenvalues(m: &DMatrix<f64>) -> Option<Vec<nalgebra::Complex<f64>>> {
     if n == 0 {
         return Some(Vec::new());
     }
-    let fm = faer::Mat::<f64>::from_fn(n, n, |i, j| m[(i, j)]);
-    let ev = fm.eigenvalues().ok()?;
+    let ev = to_faer(m).eigenvalues().ok()?;
     Some(
         ev.iter()
             .map(|z| nalgebra::Complex::new(z.re, z.im))
             .collect(),
     )
+}
+
+/// `m` as a faer matrix.
+pub(crate) fn to_faer(m: &DMatrix<f64>) -> faer::Mat<f64> {
+    faer::Mat::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)])
 }
 
 /// Largest eigenvalue modulus of a square matrix (0 for an empty one), or `None` as

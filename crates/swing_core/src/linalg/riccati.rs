@@ -23,7 +23,7 @@
 use faer::linalg::solvers::Solve;
 use nalgebra::DMatrix;
 
-use super::{eigenvalues, expm, LinalgError, EXPM_MAX_ENTRY};
+use super::{eigenvalues, expm, to_faer, LinalgError, EXPM_MAX_ENTRY};
 
 /// A Riccati solution: gain K (u = −Kx), stabilising solution P and its relative residual.
 #[derive(Clone, Debug)]
@@ -39,14 +39,8 @@ pub struct RiccatiSolution {
 /// Accepted relative Riccati residual.
 const RESIDUAL_TOL: f64 = 1e-8;
 
-/// `m` as a faer matrix.
-fn to_faer(m: &DMatrix<f64>) -> faer::Mat<f64> {
-    faer::Mat::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)])
-}
-
-/// (M + Mᵀ)/2 in place, for a faer matrix.
-fn symmetrize_faer(m: &mut faer::Mat<f64>) {
-    let n = m.nrows();
+/// (M + Mᵀ)/2 in place, for an n × n matrix of nalgebra or faer.
+fn symmetrize_n<M: std::ops::IndexMut<(usize, usize), Output = f64>>(m: &mut M, n: usize) {
     for i in 0..n {
         for j in (i + 1)..n {
             let v = 0.5 * (m[(i, j)] + m[(j, i)]);
@@ -56,15 +50,10 @@ fn symmetrize_faer(m: &mut faer::Mat<f64>) {
     }
 }
 
+/// (M + Mᵀ)/2 in place.
 fn symmetrize(m: &mut DMatrix<f64>) {
     let n = m.nrows();
-    for i in 0..n {
-        for j in (i + 1)..n {
-            let v = 0.5 * (m[(i, j)] + m[(j, i)]);
-            m[(i, j)] = v;
-            m[(j, i)] = v;
-        }
-    }
+    symmetrize_n(m, n);
 }
 
 fn check_dims(
@@ -275,8 +264,8 @@ pub fn dare_with_cross(
         let a_next = &ak * &y1;
         let mut g_next = &gk + &ak * &y2 * ak.transpose();
         let mut h_next = &hk + ak.transpose() * &hk * &y1;
-        symmetrize_faer(&mut g_next);
-        symmetrize_faer(&mut h_next);
+        symmetrize_n(&mut g_next, n);
+        symmetrize_n(&mut h_next, n);
         let change = (&h_next - &hk).norm_l2();
         let scale = h_next.norm_l2();
         if !scale.is_finite() {
