@@ -5,13 +5,15 @@ vibration on) with one thing changed: heavy vibration, steady wind along the ste
 wind, a light payload, a heavy vehicle, a double pendulum. For each, ``run_experiment`` flies
 the 300 s training flight, identifies the model (search, control-relevant selection on the
 twin) and flies the step with PX4 PID and the MPC, once with the swing sensor and once with
-nothing on the cable (``sensors.swing = "imu"``, the estimator's default scale, as a user
-who does not know the payload's mass gets it). Prints per case PX4 PID's swing excess IAE,
-each MPC's as a fraction of it, the sensorless MPC's steady-state error and the correlation
-of the IMU estimate with the true swing. The issue's bar on
-the default step: sensorless excess ≤ 1/5 of PID's and ≤ 2× the sensor MPC's. The
-correlation is taken under PID, where the payload swings freely (under a good MPC there is
-little swing left to follow).
+nothing on the cable (``sensors.swing = "imu"``: the estimator starts from its default
+scale, as a user who does not know the payload's mass gets it, and the identification
+measures the scale from the training flight, ``swingrt.sysid.imu_swing_scale``). Prints per
+case PX4 PID's swing excess IAE, each MPC's as a fraction of it, the sensorless MPC's
+steady-state error, the correlation of the IMU estimate with the true swing, and the
+estimate's scale as identified and as assumed, over the true g·m_p/m_Q (nan: the fit
+refused and the assumed scale flew). The issue's bar on the default step: sensorless excess
+≤ 1/5 of PID's and ≤ 2× the sensor MPC's. The correlation is taken under PID, where the
+payload swings freely (under a good MPC there is little swing left to follow).
 
     python benches/imu_limits.py [--cases default wind ...] [--training 300] [--seed 0]
 """
@@ -19,6 +21,7 @@ little swing left to follow).
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import tempfile
 from typing import Any
@@ -49,9 +52,11 @@ def merge(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
 def fly(source: str, names: list[str], training: float, seed: int) -> dict[str, dict]:
     """Per case: the PID and MPC rows of the experiment with every flight on ``source``, and
     the correlation of the IMU estimate with the true swing after the step under PID."""
+    from swingrt._core import GRAVITY
     from swingrt.experiments import run_experiment
     from swingrt.experiments.schema import Experiment
     from swingrt.io.flight import Trace
+    from swingrt.sysid import LinearModel
 
     exp = Experiment(
         name="imu-limits",
@@ -71,6 +76,16 @@ def fly(source: str, names: list[str], training: float, seed: int) -> dict[str, 
             true = np.asarray(tr["swing_true_n"])[keep]
             est = np.asarray(tr["swing_est_n"])[keep]
             mine["corr"] = float(np.corrcoef(true, est)[0, 1])
+            # The estimate's scale as identified, over the true g·m_p/m_Q of the flight.
+            sc = tr.meta["scenario"]
+            pay = sc["payload"]
+            m_p = pay["mass"] + (pay["mass2"] if pay["kind"] == "double" else 0.0)
+            true_k = GRAVITY * m_p / sc["vehicle"]["mass"]
+            found = LinearModel.load(f"{out}/{n}__model.json").diagnostics.get("swing_scale")
+            mine["scale"] = (
+                math.nan if not found or found["fit"] is None else found["scale"] / true_k
+            )
+            mine["assumed"] = math.nan if not found else found["assumed_scale"] / true_k
             result[n] = mine
     return result
 
@@ -86,14 +101,15 @@ def main() -> int:
     key = "swing_excess_iae_deg_s"
     print(
         f"{'case':<24} {'PID excess':>10} {'MPC sensor':>10} {'MPC imu':>8} "
-        f"{'imu/sensor':>10} {'imu ss err':>10} {'corr':>5}"
+        f"{'imu/sensor':>10} {'imu ss err':>10} {'corr':>5} {'scale/true':>10} {'assumed':>7}"
     )
     for n in args.cases:
         pid = sensor[n]["pid"][key]
         ms, mi = sensor[n]["mpc"][key], imu[n]["mpc"][key]
         print(
             f"{n:<24} {pid:>10.2f} {ms / pid:>9.3f}x {mi / pid:>7.3f}x {mi / max(ms, 1e-9):>9.2f}x "
-            f"{imu[n]['mpc']['ss_error']:>10.3f} {imu[n]['corr']:>5.2f}"
+            f"{imu[n]['mpc']['ss_error']:>10.3f} {imu[n]['corr']:>5.2f} "
+            f"{imu[n]['scale']:>10.2f} {imu[n]['assumed']:>7.2f}"
         )
     return 0
 

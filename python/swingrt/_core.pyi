@@ -47,6 +47,7 @@ __all__ = [
     "step_overshoot",
     "swing_iae",
     "swing_mode",
+    "swing_scale_fit",
     "sysid_cable_length",
     "sysid_fft_peak",
     "sysid_rls_mass",
@@ -133,6 +134,14 @@ def estimate_swing(
     vel: npt.NDArray[np.float64],
     settings: dict[str, Any] | None = None,
 ) -> npt.NDArray[np.float64]: ...
+def swing_scale_fit(
+    vel: npt.NDArray[np.float64],
+    estimate: npt.NDArray[np.float64],
+    euler: npt.NDArray[np.float64],
+    dt: float,
+    settings: Mapping[str, Any] | None = None,
+    remove_drag: bool = False,
+) -> dict[str, Any]: ...
 def body_swing(
     counts: npt.NDArray[np.float64],
     q: npt.NDArray[np.float64],

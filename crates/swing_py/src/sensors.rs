@@ -1,12 +1,15 @@
 //! Bindings of `swing_core::sensors`: the swing estimated from the vehicle's own IMU, one
 //! sample at a time (the offboard node) or over a whole log (a PX4 ULog), and the swing of a
-//! cable sensor on the airframe read from its ADC counts.
+//! cable sensor on the airframe read from its ADC counts; the estimate's scale fitted to a
+//! flight.
 
 use nalgebra::{Matrix3, Quaternion};
-use numpy::{IntoPyArray, PyArray2, PyUntypedArrayMethods};
+use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 use swing_core::plant::dynamics::rotation;
 use swing_core::sensors::{BodySensorParams, ImuSwingEstimator, ImuSwingSettings};
+use swing_core::sysid::swing_scale::{self, ScaleAxis, ScaleSettings};
 
 use crate::convert::{self, data_err};
 use crate::errors::to_py;
@@ -27,6 +30,20 @@ fn attitude(q: [f64; 4], what: impl Fn() -> String) -> PyResult<Matrix3<f64>> {
         q[2] / n,
         q[3] / n,
     )))
+}
+
+/// Every array `(name, array, width)` must be `rows`×`width`; the error names the first that
+/// is not.
+fn same_rows(rows: usize, arrays: &[(&str, &PyReadonlyArray2<f64>, usize)]) -> PyResult<()> {
+    for (name, a, width) in arrays {
+        if a.shape() != [rows, *width] {
+            return Err(data_err(format!(
+                "{name} must be {rows}×{width} (got {:?})",
+                a.shape()
+            )));
+        }
+    }
+    Ok(())
 }
 
 fn finite3(x: [f64; 3], name: &str, what: &str) -> PyResult<()> {
@@ -124,14 +141,10 @@ fn estimate_swing<'py>(
     let q = convert::array2(q, "q")?;
     let vel = convert::array2(vel, "vel")?;
     let rows = accel.shape()[0];
-    for (name, a, width) in [("accel", &accel, 3), ("q", &q, 4), ("vel", &vel, 3)] {
-        if a.shape() != [rows, width] {
-            return Err(data_err(format!(
-                "{name} must be {rows}×{width} (got {:?})",
-                a.shape()
-            )));
-        }
-    }
+    same_rows(
+        rows,
+        &[("accel", &accel, 3), ("q", &q, 4), ("vel", &vel, 3)],
+    )?;
     let (a, qs, v) = (accel.as_slice()?, q.as_slice()?, vel.as_slice()?);
     let mut out = numpy::ndarray::Array2::<f64>::zeros((rows, 2));
     for k in 0..rows {
@@ -168,14 +181,7 @@ fn body_swing<'py>(
     let counts = convert::array2(counts, "counts")?;
     let q = convert::array2(q, "q")?;
     let rows = counts.shape()[0];
-    for (name, a, width) in [("counts", &counts, 2), ("q", &q, 4)] {
-        if a.shape() != [rows, width] {
-            return Err(data_err(format!(
-                "{name} must be {rows}×{width} (got {:?})",
-                a.shape()
-            )));
-        }
-    }
+    same_rows(rows, &[("counts", &counts, 2), ("q", &q, 4)])?;
     let (c, qs) = (counts.as_slice()?, q.as_slice()?);
     let mut out = numpy::ndarray::Array2::<f64>::zeros((rows, 2));
     for k in 0..rows {
@@ -198,9 +204,96 @@ fn body_swing<'py>(
     Ok(out.into_pyarray(py))
 }
 
+/// The IMU swing estimate's scale and drag fitted to how it answers the vehicle's motion
+/// (`swing_core::sysid::swing_scale`): `vel` (N×2, N and E [m/s]), `estimate` (N×2, the
+/// estimator's swing [rad]) and `euler` (N×3, roll, pitch, yaw [rad], yaw unwrapped),
+/// sampled every `dt` s, made by an estimator with `settings`. Returns a dict: `fit` (the
+/// fitted ratio, length, drag terms, explained share and residual) or None with `reason`
+/// saying why the fit is not to be used, `estimator` (the calibrated settings, or
+/// `settings` unchanged) and `estimate` (N×2: the swing the calibrated estimator would have
+/// made, to first order, or `estimate` unchanged). The calibrated estimator keeps reading
+/// the airframe's drag as swing (scaled) unless `remove_drag`.
+#[pyfunction]
+#[pyo3(signature = (vel, estimate, euler, dt, settings=None, remove_drag=false))]
+fn swing_scale_fit<'py>(
+    py: Python<'py>,
+    vel: &Bound<'py, PyAny>,
+    estimate: &Bound<'py, PyAny>,
+    euler: &Bound<'py, PyAny>,
+    dt: f64,
+    settings: Option<&Bound<'py, PyAny>>,
+    remove_drag: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let s: ImuSwingSettings = convert::settings(settings, "estimator")?;
+    s.validate().map_err(|e| to_py(e.within("estimator")))?;
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(data_err(format!(
+            "dt must be a positive number of seconds (got {dt})"
+        )));
+    }
+    let vel = convert::array2(vel, "vel")?;
+    let est = convert::array2(estimate, "estimate")?;
+    let eul = convert::array2(euler, "euler")?;
+    let rows = vel.shape()[0];
+    same_rows(
+        rows,
+        &[("vel", &vel, 2), ("estimate", &est, 2), ("euler", &eul, 3)],
+    )?;
+    let column =
+        |a: &PyReadonlyArray2<f64>, j: usize| -> Vec<f64> { a.as_array().column(j).to_vec() };
+    let (vn, ve) = (column(&vel, 0), column(&vel, 1));
+    let (en, ee) = (column(&est, 0), column(&est, 1));
+    let [tn, te] = swing_scale::tilt(
+        &column(&eul, 0),
+        &column(&eul, 1),
+        &column(&eul, 2),
+        dt,
+        s.cutoff,
+    );
+    let axes = [
+        ScaleAxis {
+            velocity: &vn,
+            estimate: &en,
+            tilt: &tn,
+        },
+        ScaleAxis {
+            velocity: &ve,
+            estimate: &ee,
+            tilt: &te,
+        },
+    ];
+    let out = PyDict::new(py);
+    let mut corrected = numpy::ndarray::Array2::<f64>::zeros((rows, 2));
+    let fit_settings = ScaleSettings {
+        remove_drag,
+        ..ScaleSettings::default()
+    };
+    match swing_scale::fit(&axes, dt, &fit_settings) {
+        Ok(fit) => {
+            for (j, ax) in axes.iter().enumerate() {
+                for (i, x) in fit.apply(ax).into_iter().enumerate() {
+                    corrected[[i, j]] = x;
+                }
+            }
+            out.set_item("fit", convert::to_py_object(py, &fit)?)?;
+            out.set_item("reason", py.None())?;
+            out.set_item("estimator", convert::to_py_object(py, &fit.calibrated(&s))?)?;
+        }
+        Err(reason) => {
+            corrected.assign(&est.as_array());
+            out.set_item("fit", py.None())?;
+            out.set_item("reason", reason)?;
+            out.set_item("estimator", convert::to_py_object(py, &s)?)?;
+        }
+    }
+    out.set_item("estimate", corrected.into_pyarray(py))?;
+    Ok(out)
+}
+
 /// Register this domain's functions and classes on the module.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyImuSwingEstimator>()?;
+    m.add_function(wrap_pyfunction!(swing_scale_fit, m)?)?;
     m.add_function(wrap_pyfunction!(estimate_swing, m)?)?;
     m.add_function(wrap_pyfunction!(body_swing, m)?)?;
     Ok(())

@@ -41,12 +41,21 @@ def simulate_controller(
     :class:`~swingrt.methods.Trained`) learned. ``budget`` [s] is the compute time a tick
     may take before the hand-back to PX4 (default: the controller's period).
 
+    A scenario without a swing sensor (``sensors.swing = "imu"``) flies with the swing
+    estimator the ``model`` was identified with (:func:`swingrt.sysid.model_estimator`).
+
     Returns the trace and extras: fallback reason, tick timings, the controller's events
     (time [s], what, value) and (``prediction_at``) the MPC's predicted outputs from the
     first tick at or after that time.
     """
     from swingrt import _core
+    from swingrt.sysid import model_estimator
 
+    est = None if model is None else model_estimator(model)
+    if est is not None and scenario.to_dict()["sensors"]["swing"] == "imu":
+        # A flight without a swing sensor estimates the swing as the model's output was
+        # estimated (its scale and drag), whichever controller flies it.
+        scenario = scenario.with_overrides({"sensors": {"estimator": est}})
     sim = _core.Simulator(scenario)
     n_axes = len(axes)
     extras: dict[str, Any] = {}

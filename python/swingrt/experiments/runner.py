@@ -42,6 +42,24 @@ class _Log:
             print(f"[{time.perf_counter() - self.t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
 
+def swing_scale_note(scale: dict[str, Any]) -> str:
+    """What the report says of a model identified on the IMU's swing estimate: the scale it
+    flies (the estimator's) and the one measured from the training flight, or why the
+    measurement was refused."""
+    fit = scale.get("fit")
+    if fit is None:
+        return (
+            f"swing from the IMU at the scale {scale['assumed_scale']:.3f} m/s²; not "
+            f"measured from the flight: {scale['reason']}"
+        )
+    return (
+        f"swing from the IMU at the scale {scale['assumed_scale']:.3f} m/s²; measured from "
+        f"the training flight: {scale['scale']:.3f} m/s² (g·m_p/m_Q, a pendulum of "
+        f"{fit['length']:.2f} m explaining {100 * fit['explained']:.0f} % of the estimate; "
+        "reported, not flown)"
+    )
+
+
 def run_experiment(
     exp: Experiment, out: str | os.PathLike, *, seed: int = 0, quiet: bool = False
 ) -> list[dict[str, Any]]:
@@ -138,6 +156,9 @@ def run_experiment(
                 else f"; {model.diagnostics['whitebox_skipped']}"
             )
         )
+        scale = model.diagnostics.get("swing_scale")
+        if scale is not None:
+            notes.append(f"{case}: {swing_scale_note(scale)}")
         plot_case(out / f"{case}.png", case, traces, exp.axes)
         if prediction is not None and "mpc" in traces:
             plot_prediction(out / f"{case}__prediction.png", prediction, traces["mpc"], model)

@@ -800,23 +800,16 @@ def load_controller(model_path, settings=None, *, adapt: bool = False, adaptive=
 
 
 def model_swing_estimator(model_path) -> dict | None:
-    """The swing estimator a flight on the model at ``model_path`` needs: its settings when
-    the model was identified on the swing estimated from the IMU (``swing_source = "imu"``;
-    the same estimator, or the model's swing output means something else), else None (a
-    swing sensor)."""
-    from swingrt.sysid import LinearModel
+    """The swing estimator a flight on the model at ``model_path`` needs
+    (:func:`swingrt.sysid.model_estimator`): the calibrated settings of a model identified
+    on the IMU's swing estimate, else None (a swing sensor)."""
+    from swingrt.sysid import LinearModel, model_estimator
 
     p = Path(model_path)
-    d = LinearModel.load(p).diagnostics
-    if d.get("swing_source") != "imu":
-        return None
-    est = d.get("swing_estimator")
-    if not isinstance(est, dict):
-        raise ModelError(
-            f"{p}: the model was identified on the IMU's swing estimate but does not say with "
-            "which estimator settings (diagnostics.swing_estimator)"
-        )
-    return dict(est)
+    try:
+        return model_estimator(LinearModel.load(p))
+    except ModelError as exc:
+        raise ModelError(f"{p}: {exc}") from None
 
 
 #: P gain [1/s] of the East velocity hold while a one-axis controller flies North.

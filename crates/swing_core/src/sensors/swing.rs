@@ -28,7 +28,7 @@
 //!
 //! To first order the estimate is θ̂ ≈ (k/k̂)(θ − tilt) + tilt: a wrong scale both scales the
 //! swing and leaks (1 − k/k̂) of the vehicle's tilt into it, which is why the scale is
-//! calibrated (from the flight's own dynamics or the thrust, `sysid::imu_swing`). The
+//! calibrated from the flight's own dynamics (`sysid::swing_scale`). The
 //! dynamic tension (centripetal m_p l θ̇², the vehicle's vertical acceleration) changes k by a
 //! few per cent at most in the swings that matter here.
 

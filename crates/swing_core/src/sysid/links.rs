@@ -79,7 +79,7 @@ pub struct DoublePendulum {
 }
 
 /// Coefficients of the filtered equation: [α, δ₃, β, δ₁, γ, bias] (δ: damping terms).
-type Coefficients = [f64; 6];
+pub(super) type Coefficients = [f64; 6];
 
 /// First-order-hold discretisation of x' = A x + b u (one input) at `dt`: (Φ, Γ₁, Γ₂) with
 /// x_{k+1} = Φ x_k + Γ₁ u_k + Γ₂ (u_{k+1} − u_k), exact for an input linear between samples.
@@ -136,7 +136,7 @@ fn filtered(u: &[f64], dt: f64, lambda: f64) -> [Vec<f64>; 5] {
 
 /// Noise-free swing of the coefficients' model, driven by the measured velocity `v`: the
 /// modes of α s⁴ + β s² + 1 with `damping`, numerator −(γ s³ + s/g) acting on v.
-fn simulate(coef: &Coefficients, v: &[f64], dt: f64, damping: f64) -> Option<Vec<f64>> {
+pub(super) fn simulate(coef: &Coefficients, v: &[f64], dt: f64, damping: f64) -> Option<Vec<f64>> {
     let [alpha, _, beta, _, gamma, _] = *coef;
     // Denominator as a monic quartic: a single pendulum (α = 0) is one mode of β s² + 1.
     let (den, num): (Vec<f64>, Vec<f64>) = if alpha.abs() < 1e-12 {
@@ -180,12 +180,27 @@ fn simulate(coef: &Coefficients, v: &[f64], dt: f64, damping: f64) -> Option<Vec
     if phi.iter().any(|x| !x.is_finite()) {
         return None;
     }
-    let mut x = DVector::<f64>::zeros(n);
+    // The recursion on the stack (n ≤ 4): the swing-scale fit runs it hundreds of times over
+    // a whole flight, where a heap matrix product per sample would dominate.
+    let mut p = [[0.0; 4]; 4];
+    let (mut h1, mut h2) = ([0.0; 4], [0.0; 4]);
+    for r in 0..n {
+        for c in 0..n {
+            p[r][c] = phi[(r, c)];
+        }
+        h1[r] = g1[r];
+        h2[r] = g2[r];
+    }
+    let mut x = [0.0; 4];
     let mut out = Vec::with_capacity(v.len());
     for (i, &vk) in v.iter().enumerate() {
         out.push(num.iter().zip(x.iter()).map(|(c, xi)| c * xi).sum::<f64>());
-        let next = v.get(i + 1).copied().unwrap_or(vk);
-        x = &phi * &x + &g1 * vk + &g2 * (next - vk);
+        let dv = v.get(i + 1).copied().unwrap_or(vk) - vk;
+        let mut next = [0.0; 4];
+        for r in 0..n {
+            next[r] = (0..n).map(|c| p[r][c] * x[c]).sum::<f64>() + h1[r] * vk + h2[r] * dv;
+        }
+        x = next;
     }
     out.iter().all(|y| y.is_finite()).then_some(out)
 }

@@ -19,6 +19,7 @@ pub mod search;
 pub mod settings;
 pub mod smooth;
 pub mod stability;
+pub mod swing_scale;
 pub mod whitebox;
 
 pub use error::SysidError;
