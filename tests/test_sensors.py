@@ -247,3 +247,18 @@ def test_an_imu_swing_that_does_not_follow_the_motion_keeps_the_assumed_scale_an
     assert d["fit"] is None and "payload" in d["reason"], d
     assert d["scale"] == d["assumed_scale"]
     assert np.array_equal(imu_swing_scale(flight)["swing"][:, 0], flight["swing_est_n"])
+
+
+def test_an_attitude_gap_refuses_the_scale_measurement_not_the_identification():
+    # The measured scale is reported, not flown: a gap in the attitude, which only the
+    # measurement reads, must not stop the model.
+    from swingrt.sysid import identify
+
+    flight = swingrt.collect({"sensors": {"swing": "imu"}}, duration=60.0, seed=2)
+    roll = np.asarray(flight["roll"], dtype=float).copy()
+    roll[1000:1010] = np.nan
+    flight["roll"] = roll
+    model = identify(flight, delays=10, rank=12)
+    d = model.diagnostics["swing_scale"]
+    assert d["fit"] is None and "roll" in d["reason"] and "not finite" in d["reason"], d
+    assert d["scale"] == d["assumed_scale"]

@@ -238,12 +238,15 @@ def imu_swing_scale(data: Any) -> dict[str, Any]:
     given = swing_estimator(data) or {}
     settings = dict(_core.ImuSwingEstimator(given or None).settings)
     missing = [c for c in names if c not in cols]
-    if missing:
-        found: dict[str, Any] = {
-            "estimator": settings,
-            "fit": None,
-            "reason": f"the flight has no column(s) {', '.join(missing)}",
-        }
+    reason = f"the flight has no column(s) {', '.join(missing)}" if missing else None
+    if reason is None:
+        # The measurement is reported, not flown: a gap in a column it alone reads (the
+        # attitude) refuses it rather than the identification.
+        gaps = [c for c in names if not np.isfinite(np.asarray(cols[c], dtype=float)).all()]
+        if gaps:
+            reason = f"column(s) {', '.join(gaps)} are not finite throughout the flight"
+    if reason is not None:
+        found: dict[str, Any] = {"estimator": settings, "fit": None, "reason": reason}
         nan = np.full(len(cols["t"]), np.nan)
         swing = np.column_stack([np.asarray(cols.get(f"swing_est_{a}", nan), float) for a in "ne"])
     else:
