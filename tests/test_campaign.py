@@ -438,3 +438,60 @@ def test_hand_started_scheduler_gives_the_same_rows(cli, reference, tmp_path):
             except subprocess.TimeoutExpired:
                 os.killpg(p.pid, signal.SIGKILL)
                 p.wait()
+
+
+# --- missions as the evaluation flight ------------------------------------------------------
+
+MISSION_PLAN = {"waypoints": 2, "leg_min": 15.0, "leg_max": 25.0, "acceptance_radius": 0.3}
+
+
+def _mission_study(**over) -> dict:
+    base = {"axes": "ne", "training_duration": 150.0, "identify": {"twin": "off"}}
+    base["mission"] = dict(MISSION_PLAN)
+    return {
+        "name": "m",
+        "samples": 2,
+        "controllers": ["pid", "mpc"],
+        "base": base,
+        "vary": {"payload.length": {"dist": "uniform", "low": 0.8, "high": 1.6}},
+    } | over
+
+
+@pytest.mark.parametrize(
+    ("change", "named"),
+    [
+        ({"controllers": ["pid", "lqr", "mpc"]}, "'lqr' does not fly missions"),
+        ({"base": {"mission": dict(MISSION_PLAN)}}, 'axes = "ne"'),
+        ({"base": {"axes": "ne", "mission": {**MISSION_PLAN, "seed": 1}}}, "seed is the sample"),
+        ({"base": {"axes": "ne", "mission": {**MISSION_PLAN, "leg_max": 5.0}}}, "mission.leg_max"),
+    ],
+)
+def test_a_mission_study_is_refused_by_name_before_flying(change, named):
+    from swingrt.campaign.spec import check_spec
+
+    with pytest.raises(ConfigError) as err:
+        check_spec(parse_spec(_mission_study(**change)))
+    assert named in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_mission_sample_flies_the_plan_with_px4_and_the_mpc_and_judges_it():
+    from swingrt import mission as ms
+
+    spec = parse_spec(_mission_study())
+    rows, traces = fly_sample(spec.raw, 0)
+    by = {r["controller"]: r for r in rows}
+    assert set(by) == {"pid", "mpc"} and not by["mpc"]["error"], by["mpc"]["error"]
+    for r in rows:
+        assert set(ms.SUMMARY_COLUMNS) <= set(r) and "_waypoints" not in r
+        assert r["failure"] == ms.mission_failure(r, judged=r["controller"] != "pid")
+    # The plan is the sample's: both flew the same waypoints, each finishing it.
+    plan = spec.mission(spec.draw(0), 0)
+    for c in ("pid", "mpc"):
+        reached = [i for _, i, k in traces[c].meta["mission_events"] if k == "reached"]
+        assert reached == list(range(len(plan)))
+    assert by["pid"]["time_vs_px4"] == 1.0
+    assert by["mpc"]["time_vs_px4"] == pytest.approx(by["mpc"]["total_s"] / by["pid"]["total_s"])
+    # The MPC damps the legs: below half of PX4's largest swing on every leg.
+    assert by["mpc"]["leg_swing_vs_px4"] < 0.5
+    # Another sample draws another plan.
+    assert spec.mission(spec.draw(1), 1) != plan

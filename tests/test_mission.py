@@ -135,3 +135,118 @@ def test_swingrt_mission_flies_the_position_mpc_on_a_model(tmp_path, capsys):
     assert [r["item"] for r in mpc] == [0, 1, 2]
     for a, b in zip(px4[1:], mpc[1:], strict=True):
         assert b["leg_swing_max_deg"] < a["leg_swing_max_deg"]
+
+
+# --- what a mission flight is judged by ------------------------------------------------------
+
+
+def _passing() -> dict:
+    """A mission flight's summary that passes every rule with room to spare."""
+    return {
+        "total_s": 50.0,
+        "leg_swing_max_deg": 10.0,
+        "residual_swing_deg": 5.0,
+        "settle_1deg_s": 1.0,
+        "hold_error_m": 0.1,
+        "payload_hold_error_m": 0.2,
+        "overshoot_m": 0.1,
+        "peak_swing_deg": 10.0,
+        "time_vs_px4": 1.0,
+        "leg_swing_vs_px4": 0.3,
+    }
+
+
+@pytest.mark.parametrize(
+    ("change", "reason"),
+    [
+        ({"error": "DataError: x"}, "error"),
+        ({"fallback": "handed back to PX4"}, "fallback"),
+        ({"peak_swing_deg": 61.0}, "diverged"),
+        ({"hold_error_m": math.nan}, "diverged"),
+        ({"settle_1deg_s": math.inf}, "settle"),
+        ({"settle_1deg_s": 2.01}, "settle"),
+        ({"hold_error_m": 0.31}, "hold"),
+        ({"time_vs_px4": 1.16}, "slow"),
+        ({"leg_swing_vs_px4": 0.51}, "swing"),
+    ],
+)
+def test_a_mission_flight_that_breaks_one_rule_fails_for_that_rule(change, reason):
+    from swingrt import mission as ms
+
+    assert ms.mission_failure(_passing()) == ""
+    assert ms.mission_failure({**_passing(), **change}) == reason
+    # PX4's own flight is not compared with itself.
+    if reason in ("slow", "swing"):
+        assert ms.mission_failure({**_passing(), **change}, judged=False) == ""
+
+
+def test_the_comparison_with_px4_takes_the_worst_leg_not_the_worst_swing():
+    from swingrt import mission as ms
+
+    px4 = [{"item": 0.0, "leg_swing_max_deg": 0.0}, {"item": 1.0, "leg_swing_max_deg": 40.0}]
+    px4.append({"item": 2.0, "leg_swing_max_deg": 10.0})
+    mine = [{"item": 0.0, "leg_swing_max_deg": 0.0}, {"item": 1.0, "leg_swing_max_deg": 12.0}]
+    mine.append({"item": 2.0, "leg_swing_max_deg": 6.0})
+    r = ms.compare({"total_s": 60.0}, mine, {"total_s": 50.0}, px4)
+    # Leg 1: 12/40 = 0.3; leg 2: 6/10 = 0.6, though its swing is the smaller one.
+    assert r == {"time_vs_px4": pytest.approx(1.2), "leg_swing_vs_px4": pytest.approx(0.6)}
+    none = ms.compare({"total_s": 60.0}, mine, None, None)
+    assert math.isnan(none["time_vs_px4"]) and math.isnan(none["leg_swing_vs_px4"])
+
+
+def test_a_steady_lean_in_the_wind_is_not_residual_swing():
+    from swingrt import mission as ms
+
+    m = _core.Mission.from_text(SQUARE, "toml")
+    t = np.arange(0.0, 40.0, 0.01)
+    wp = np.array([it["position"] for it in m.items])
+    # At rest on each waypoint in turn, the payload leaning a steady 3° North and swinging
+    # 0.5° about that lean at 0.6 Hz.
+    k = np.minimum((t // 10).astype(int), 2)
+    lean, wobble = math.radians(3.0), math.radians(0.5) * np.sin(2 * math.pi * 0.6 * t)
+    tr = {"t": t, "pn": wp[k, 0], "pe": wp[k, 1], "swing_n": lean + wobble}
+    tr["swing_e"] = np.zeros_like(t)
+    tr["payload_pn"], tr["payload_pe"] = tr["pn"] + 0.05, tr["pe"]
+    events = [(0.0, 0, "reached"), (5.0, 0, "left"), (10.0, 1, "reached"), (15.0, 1, "left")]
+    events += [(20.0, 2, "reached"), (25.0, 2, "completed")]
+    rows = ms.waypoint_report(m, tr, events)
+    for r in rows[1:]:
+        assert r["leg_swing_max_deg"] == pytest.approx(3.5, abs=0.01)
+        # The hang is the mean over the hold's last 2.5 s, 1.5 periods of the wobble: it is
+        # off by at most the wobble over π × 1.5.
+        assert r["residual_swing_deg"] == pytest.approx(0.5, abs=0.5 / (math.pi * 1.5))
+        assert r["settle_1deg_s"] == 0.0 and r["hold_error_m"] == 0.0
+    s = ms.summary(rows, 25.0, tr)
+    assert s["peak_swing_deg"] == pytest.approx(3.5, abs=0.01) and s["total_s"] == 25.0
+
+
+def test_the_swing_period_of_an_identified_model_is_the_payloads():
+    from swingrt import mission as ms
+    from swingrt.sysid import identify, swing_period
+
+    # The coupled period of vehicle and payload lies between the pendulum's own 2π√(l/g)
+    # (vehicle held) and 2π√(l/(g (1 + m_p/m_Q))) (vehicle free).
+    m = _core.Mission.from_text(SQUARE, "toml")
+    for length in (0.6, 1.5):
+        trace, _ = ms.fly(m, "px4", {"payload": {"mass": 0.3, "length": length}})
+        model = identify(trace, axes="ne", method="whitebox", payload_mass=0.3, test_span=8.0)
+        period = swing_period(model)
+        free = 2 * math.pi * math.sqrt(length / (9.81 * (1 + 0.3 / 0.952)))
+        held = 2 * math.pi * math.sqrt(length / 9.81)
+        assert period is not None and 0.95 * free <= period <= 1.05 * held
+        legs = ms.shaped_legs(model)
+        assert legs["jerk_max"] == pytest.approx(min(1.6, legs["acc_max"] / period))
+        dmdc = identify(trace, axes="ne", delays=10, test_span=8.0)
+        assert swing_period(dmdc) == pytest.approx(period, rel=0.1)
+
+
+def test_swingrt_mission_draws_the_paths_and_the_swing(tmp_path, capsys):
+    from swingrt.cli import main
+
+    (tmp_path / "square.toml").write_text(SQUARE)
+    fig = tmp_path / "mission.png"
+    args = ["mission", str(tmp_path / "square.toml"), "--figure", str(fig)]
+    assert main(args) == 0
+    out = capsys.readouterr().out
+    assert "against PX4's mission mode" in out and f"wrote {fig}" in out
+    assert fig.stat().st_size > 20_000 and fig.read_bytes()[:4] == b"\x89PNG"

@@ -1,6 +1,19 @@
 """Missions flown in the built-in simulator and what a user reads after the flight: one row
 per waypoint (arrival, overshoot, swing on the leg and after arrival, settling below 1°,
-vehicle and payload error during the hold)."""
+vehicle and payload error during the hold), one summary row per flight (the worst
+waypoint of each column) and the rules a mission flight is judged by in campaigns.
+
+**Failure** of a mission flight (:func:`mission_failure`), the issue's acceptance per flight:
+
+- ``error``, ``fallback``, ``diverged`` as for a step (:mod:`swingrt.campaign.flight`);
+- ``settle``: after some arrival the swing was not within ``SETTLED_DEG`` of vertical
+  within ``SETTLE_LIMIT_S`` (and stayed so for the rest of the hold);
+- ``hold``: the vehicle left ``HOLD_LIMIT_M`` of a waypoint during its hold;
+- ``slow`` (not PX4's own flight): the plan took more than ``TIME_RATIO_LIMIT``× PX4's mission
+  mode's time on the same sample;
+- ``swing`` (not PX4's): some leg's largest swing was more than ``LEG_SWING_RATIO``× PX4's on
+  that leg.
+"""
 
 from __future__ import annotations
 
@@ -12,9 +25,21 @@ import numpy as np
 
 from swingrt import _core
 from swingrt.errors import ConfigError
+from swingrt.scenario import ScenarioLike, resolve
 
 #: Swing below which the payload counts as settled [deg].
 SETTLED_DEG = 1.0
+
+#: Time after an arrival within which the swing must be within ``SETTLED_DEG`` [s].
+SETTLE_LIMIT_S = 2.0
+#: Largest distance from a waypoint during its hold [m].
+HOLD_LIMIT_M = 0.3
+#: Mission time, as a multiple of PX4's mission mode's, above which a flight is slow.
+TIME_RATIO_LIMIT = 1.15
+#: A leg's largest swing, as a fraction of PX4's on the same leg, above which it fails.
+LEG_SWING_RATIO = 0.5
+#: Peak swing above which a mission flight counts as diverged [deg].
+DIVERGED_SWING_DEG = 60.0
 
 #: Columns of the per-waypoint report, in order.
 COLUMNS = (
@@ -29,6 +54,23 @@ COLUMNS = (
 )
 
 
+#: Columns of a mission flight's summary (:func:`summary`): the plan's time, the worst
+#: waypoint of each per-waypoint column (a swing that never settled is ∞), the peak swing,
+#: and the ratios to PX4's own flight of the same sample (:func:`compare`).
+SUMMARY_COLUMNS = (
+    "total_s",
+    "leg_swing_max_deg",
+    "residual_swing_deg",
+    "settle_1deg_s",
+    "hold_error_m",
+    "payload_hold_error_m",
+    "overshoot_m",
+    "peak_swing_deg",
+    "time_vs_px4",
+    "leg_swing_vs_px4",
+)
+
+
 def load(path: str) -> _core.Mission:
     """Read a QGroundControl ``.plan`` or a TOML mission, chosen by the file's extension."""
     kinds = {".plan": "plan", ".toml": "toml"}
@@ -38,33 +80,50 @@ def load(path: str) -> _core.Mission:
     return _core.Mission.from_text(Path(path).read_text(encoding="utf-8"), kind)
 
 
+def shaped_legs(model: _core.LinearModel) -> dict[str, Any]:
+    """swingrt's leg settings shaped against the swing ``model`` identified: the jerk ramps
+    of every acceleration change last one swing period (:func:`swingrt.sysid.swing_period`),
+    at the core's default acceleration bound. A ramp of acceleration over exactly one period
+    is a boxcar of jerk whose spectrum is zero at that period's frequency, so the legs leave
+    the payload no residual swing at the ends of their ramps whatever the leg's length; the
+    jerk never exceeds the core's default. Without a swing period the defaults stand."""
+    from swingrt.sysid import swing_period
+
+    legs = _core.check_settings("guidance", {"mode": "smooth"})
+    period = swing_period(model)
+    if period is not None:
+        legs["jerk_max"] = min(float(legs["jerk_max"]), float(legs["acc_max"]) / period)
+    return legs
+
+
 def fly(
     mission: _core.Mission,
-    guidance: str,
-    scenario: dict[str, Any] | None = None,
+    guidance: str | dict[str, Any],
+    scenario: ScenarioLike = None,
     seed: int = 0,
     model: _core.LinearModel | None = None,
+    tracking: dict[str, Any] | None = None,
 ) -> tuple[dict[str, np.ndarray], list[tuple[float, int, str]]]:
     """Fly ``mission`` in the simulator under PX4's cascade with ``guidance`` (``px4``: PX4's
-    mission behaviour; ``smooth``: swingrt's jerk-limited legs), tracked by the position MPC
-    with preview on ``model`` when one is given; returns the trace and the mission's events.
+    mission behaviour; ``smooth``: swingrt's jerk-limited legs; or the guidance settings, as
+    :func:`shaped_legs` gives), tracked by the position MPC with preview on ``model`` when
+    one is given (``tracking``: its settings, ``TrackingSettings``); returns the trace and
+    the mission's events.
     The flight ends at the last hold's end (or fails after a time limit)."""
-    from swingrt.scenario import resolve
-
     items = mission.items
     legs = sum(
         math.dist(a["position"], b["position"]) / max(b["speed"] or 1.0, 0.1)
         for a, b in zip(items, items[1:], strict=False)
     )
     limit = 1.0 + 3.0 * legs + sum(it["hold"] for it in items) + 30.0
-    cfg = dict(scenario or {})
-    cfg["start"] = list(mission.start)
-    sim = _core.Simulator(resolve(cfg, duration=limit, seed=seed))
-    sim.fly_mission(mission, {"mode": guidance}, 1.0)
+    base = resolve(scenario)
+    sc = base.with_overrides({"start": list(mission.start)})
+    sim = _core.Simulator(resolve(sc, duration=limit, seed=seed))
+    sim.fly_mission(mission, {"mode": guidance} if isinstance(guidance, str) else guidance, 1.0)
     if model is not None:
         # The budget is wall-clock per tick; the simulator is not real-time, so a loaded
         # machine must not hand the axes back to PX4.
-        sim.attach_tracking_mpc(model, None, 1.0, 1.0)
+        sim.attach_tracking_mpc(model, tracking, 1.0, 1.0)
     while not sim.mission_done and sim.t < limit - 0.5:
         sim.advance(0.5)
     if not sim.mission_done:
@@ -79,7 +138,9 @@ def waypoint_report(
 ) -> list[dict[str, float]]:
     """One row per waypoint (see ``COLUMNS``): the leg is the flight from leaving the previous
     item to reaching this one, the hold from reaching it to leaving it; distances are
-    horizontal; the swing is the true cable angle from vertical."""
+    horizontal; the swing is the true cable angle, from vertical on the leg, and during the
+    hold (residual swing, settling) about the payload's hang there: the mean angle over the
+    hold's second half, which a steady wind leans off vertical."""
     t = trace["t"]
     sn = trace.get("swing_true_n", trace["swing_n"])
     se = trace.get("swing_true_e", trace["swing_e"])
@@ -106,9 +167,15 @@ def waypoint_report(
             if np.linalg.norm(d) > 1e-9:
                 ahead = (pos[after] - wp) @ (d / np.linalg.norm(d))
                 overshoot = float(max(0.0, ahead[t[after] <= t_out].max(initial=0.0)))
-        # Settled from the first instant after which the swing stays below 1° to the end of
-        # the hold; NaN when it is still above at the hold's end.
-        above = np.nonzero(hold & (swing > SETTLED_DEG))[0]
+        # The swing left after arrival is measured about where the payload hangs at the
+        # hold (a steady wind leans it off vertical, which is not swing and no controller
+        # removes): the mean angle over the hold's second half.
+        calm = hold & (t >= 0.5 * (t_in + t_out))
+        hang = np.array([sn[calm].mean(), se[calm].mean()]) if calm.any() else np.zeros(2)
+        about = np.degrees(np.hypot(sn - hang[0], se - hang[1]))
+        # Settled from the first instant after which that swing stays below 1° to the end
+        # of the hold; NaN when it is still above at the hold's end.
+        above = np.nonzero(hold & (about > SETTLED_DEG))[0]
         last = np.nonzero(hold)[0]
         if above.size == 0:
             settle = 0.0
@@ -122,7 +189,7 @@ def waypoint_report(
                 "arrival_s": float(t_in),
                 "overshoot_m": overshoot,
                 "leg_swing_max_deg": float(swing[leg].max(initial=0.0)),
-                "residual_swing_deg": float(swing[hold].max(initial=0.0)),
+                "residual_swing_deg": float(about[hold].max(initial=0.0)),
                 "settle_1deg_s": settle,
                 "hold_error_m": float(np.linalg.norm(pos[hold] - wp, axis=1).max(initial=0.0)),
                 "payload_hold_error_m": float(
@@ -139,4 +206,82 @@ def format_report(name: str, rows: list[dict[str, float]], total: float) -> str:
     for r in rows:
         cells = [f"{int(r['item']):>4d}"] + [f"{r[c]:>{len(c)}.2f}" for c in COLUMNS[1:]]
         lines.append("  " + "  ".join(cells))
+    return "\n".join(lines)
+
+
+def summary(
+    rows: list[dict[str, float]], total: float, trace: dict[str, np.ndarray]
+) -> dict[str, float]:
+    """A mission flight in one row (:data:`SUMMARY_COLUMNS` but the ratios): the worst
+    waypoint of each column, ∞ for a swing that did not settle within its hold."""
+    legs = rows[1:] or rows
+
+    def worst(col: str) -> float:
+        vals = [math.inf if math.isnan(r[col]) else r[col] for r in legs]
+        return float(max(vals, default=0.0))
+
+    sn = trace.get("swing_true_n", trace["swing_n"])
+    se = trace.get("swing_true_e", trace["swing_e"])
+    return {
+        "total_s": float(total),
+        **{c: worst(c) for c in SUMMARY_COLUMNS[1:7]},
+        "peak_swing_deg": float(np.degrees(np.hypot(sn, se)).max(initial=0.0)),
+    }
+
+
+def compare(
+    flight: dict[str, float],
+    rows: list[dict[str, float]],
+    px4: dict[str, float] | None,
+    px4_rows: list[dict[str, float]] | None,
+) -> dict[str, float]:
+    """The ratios of :data:`SUMMARY_COLUMNS` to PX4's own flight of the same plan: the time,
+    and the largest over legs of a leg's largest swing over PX4's on that leg (NaN without
+    PX4's flight)."""
+    if px4 is None or not px4_rows:
+        return {"time_vs_px4": math.nan, "leg_swing_vs_px4": math.nan}
+    theirs = {int(r["item"]): r["leg_swing_max_deg"] for r in px4_rows}
+    ratios = [
+        r["leg_swing_max_deg"] / theirs[int(r["item"])]
+        for r in rows[1:]
+        if theirs.get(int(r["item"]), 0.0) > 0.0
+    ]
+    return {
+        "time_vs_px4": flight["total_s"] / px4["total_s"],
+        "leg_swing_vs_px4": float(max(ratios, default=math.nan)),
+    }
+
+
+def mission_failure(row: dict[str, Any], judged: bool = True) -> str:
+    """Why a mission flight failed ('' when it did not); the module docs give the rules.
+    ``judged``: whether the comparisons with PX4's own flight apply (not to PX4's)."""
+    if row.get("error"):
+        return "error"
+    if row.get("fallback"):
+        return "fallback"
+    vals = [row.get(c) for c in SUMMARY_COLUMNS[:8]]
+    if any(isinstance(v, float) and math.isnan(v) for v in vals) or (
+        row.get("peak_swing_deg", 0.0) > DIVERGED_SWING_DEG
+    ):
+        return "diverged"
+    if row.get("settle_1deg_s", 0.0) > SETTLE_LIMIT_S:
+        return "settle"
+    if row.get("hold_error_m", 0.0) > HOLD_LIMIT_M:
+        return "hold"
+    if judged and row.get("time_vs_px4", 0.0) > TIME_RATIO_LIMIT:
+        return "slow"
+    if judged and row.get("leg_swing_vs_px4", 0.0) > LEG_SWING_RATIO:
+        return "swing"
+    return ""
+
+
+def format_comparison(flights: dict[str, dict[str, Any]]) -> str:
+    """Each flight's summary against PX4's mission mode, and the rules it failed."""
+    cols = ("total_s", "time_vs_px4", "leg_swing_vs_px4", "settle_1deg_s", "hold_error_m")
+    lines = ["against PX4's mission mode (worst waypoint):", "  flight  " + "  ".join(cols)]
+    for name, f in flights.items():
+        s = f["summary"]
+        cells = [f"{s[c]:>{len(c)}.2f}" for c in cols]
+        verdict = f.get("failure") or "passes"
+        lines.append(f"  {name:<6}  " + "  ".join(cells) + f"  {verdict}")
     return "\n".join(lines)

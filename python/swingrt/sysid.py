@@ -57,6 +57,7 @@ __all__ = [
     "sweep_noise",
     "sweep_sample_time",
     "sweep_training_length",
+    "swing_period",
     "swing_source",
     "to_statespace",
 ]
@@ -609,6 +610,46 @@ def to_statespace(model: LinearModel) -> Any:
     return control.ss(
         model.A, model.B, C, D, model.dt, inputs=list(model.inputs), outputs=list(model.states)
     )
+
+
+#: Swing periods :func:`swing_period` looks for [s]: cables of 4 cm to 25 m.
+SWING_PERIODS = (0.4, 10.0)
+
+
+def swing_period(model: LinearModel, span: float = 30.0) -> float | None:
+    """The period [s] of the swing the model answers an acceleration pulse with on its
+    first axis: the largest peak, within :data:`SWING_PERIODS`, of the spectrum of the swing
+    output's pulse response over ``span`` seconds (the affine drift removed by subtracting
+    the unforced response). It is the period of vehicle and payload together under PX4's
+    cascade, which is what a reference shaped against the swing must match: shorter than
+    the pendulum's own 2π√(l/g) by about √(1 + m_p/m_Q) when the cascade leaves the vehicle
+    free to be pulled. None when the model carries no swing output or no peak stands out."""
+    swings = [i for i, s in enumerate(model.states) if s.startswith("swing")]
+    if not swings or not model.inputs:
+        return None
+    q, n = model.delays, len(model.states)
+    steps = max(int(round(span / model.dt)), 16)
+    hist = np.zeros((q, n))
+    u0 = np.zeros((steps, len(model.inputs)))
+    u1 = u0.copy()
+    u1[: max(1, int(round(0.05 / model.dt))), 0] = 1.0
+    s = model.predict(hist, u1)[:, swings[0]] - model.predict(hist, u0)[:, swings[0]]
+    if not np.all(np.isfinite(s)) or not np.any(s):
+        return None
+    pad = 16 * steps
+    spectrum = np.abs(np.fft.rfft((s - s.mean()) * np.hanning(steps), n=pad))
+    f = np.fft.rfftfreq(pad, model.dt)
+    band = (f >= 1.0 / SWING_PERIODS[1]) & (f <= 1.0 / SWING_PERIODS[0])
+    if not band.any():
+        return None
+    k = int(np.argmax(np.where(band, spectrum, -np.inf)))
+    # A peak is a period only if it stands above the band's typical level (a model whose
+    # swing only creeps has a flat, falling spectrum whose maximum sits at the band's edge).
+    if k in (int(np.argmax(band)), len(band) - 1 - int(np.argmax(band[::-1]))):
+        return None
+    if spectrum[k] < 3.0 * float(np.median(spectrum[band])):
+        return None
+    return float(1.0 / f[k])
 
 
 # --------------------------------------------------------------------------- evaluate

@@ -5,6 +5,12 @@
 //! at 0.03 s and fitted in 50 delay coordinates (dense top rows, exact shifts below),
 //! seed 7. After criterion's runs the median / p99 per tick are printed from
 //! `swing_bench::tick_timing` (the budgets of docs/architecture.md, "Budgets").
+//!
+//! `tracking_step`: one tick of the position-tracking MPC with preview (position states
+//! added, the reference's future over the horizon, both axes, the 1.6 m/s² leg bound)
+//! flying swingrt's legs of a two-leg plan with a 90° turn, guidance update and preview
+//! fill included, on the same model with 0.3 kg on 1.5 m; the median and p99 per tick
+//! are printed after criterion's runs.
 
 #![allow(clippy::needless_range_loop)]
 
@@ -14,7 +20,10 @@ use std::time::{Duration, Instant};
 use criterion::{criterion_group, criterion_main, Criterion};
 use swing_bench::tick_timing;
 use swing_core::control::mpc::{MpcController, MpcSettings, QpSolverKind};
-use swing_core::control::{AxisState, LinearPlant, SwingController, TickKind};
+use swing_core::control::{
+    AxisState, LinearPlant, SwingController, TickKind, TrackingMpc, TrackingSettings,
+};
+use swing_core::mission::{GuidanceSettings, Mission, PreviewBuffer};
 use swing_core::plant::PendulumModel;
 use swing_core::sysid::LinearModel;
 use swing_core::testing::pendulum_delay_model;
@@ -74,6 +83,57 @@ fn timed_ticks(m: &LinearModel, s: &MpcSettings, constrained: bool, iters: u64) 
     total
 }
 
+/// The plan the tracking bench flies: 30 m North, then 20 m East, 2 s holds.
+const PLAN: &str = "acceptance_radius = 0.3\nhold = 2.0\nspeed = 5.0\n\
+    [[waypoint]]\nn = 0\ne = 0\nd = -10\n[[waypoint]]\nn = 30\ne = 0\nd = -10\n\
+    [[waypoint]]\nn = 30\ne = 20\nd = -10\n";
+
+/// Per-tick durations of the tracking MPC over `ticks` ticks of the plan (restarted when it
+/// ends), guidance update and preview fill included, with the model as plant.
+fn tracking_ticks(m: &LinearModel, ticks: usize) -> Vec<Duration> {
+    let mission = Mission::from_toml(PLAN).expect("plan");
+    let settings = TrackingSettings {
+        mpc: MpcSettings {
+            acc_max: Some(1.6),
+            ..swing_core::control::mpc::tracking::tracking_mpc_defaults()
+        },
+        ..TrackingSettings::default()
+    };
+    let mut ctrl = TrackingMpc::new(m, settings).expect("tracking controller");
+    let mut buf = PreviewBuffer::new(ctrl.reference_steps(), 2);
+    let ts = m.dt;
+    let mut out = Vec::with_capacity(ticks);
+    while out.len() < ticks {
+        let mut g = GuidanceSettings::default()
+            .build(&mission)
+            .expect("guidance");
+        let mut plant = LinearPlant::new(m).expect("plant");
+        let mut pos = [0.0, 0.0];
+        g.start(0.0, &[0.0, 0.0, -10.0], &[0.0; 3]);
+        ctrl.reset(&plant.state(), &[0.0, 0.0]);
+        let mut k = 0usize;
+        while !g.done() && out.len() < ticks && k < 20_000 {
+            let t = k as f64 * ts;
+            let st = plant.state();
+            let mut u = [0.0; 2];
+            let t0 = Instant::now();
+            g.update(t, ts, &[pos[0], pos[1], -10.0], &[st[0].v, st[1].v, 0.0]);
+            let view = buf.fill(g.as_ref(), t, ts);
+            ctrl.observe_reference(black_box(&pos), &view);
+            ctrl.step(black_box(&st), &[0.0, 0.0], &mut u)
+                .expect("tick");
+            out.push(t0.elapsed());
+            plant.step(&u);
+            let after = plant.state();
+            for a in 0..2 {
+                pos[a] += 0.5 * ts * (st[a].v + after[a].v);
+            }
+            k += 1;
+        }
+    }
+    out
+}
+
 fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("mpc_step");
     g.measurement_time(Duration::from_secs(3)).sample_size(30);
@@ -102,6 +162,30 @@ fn bench(c: &mut Criterion) {
     for line in report {
         println!("  {line}");
     }
+    let p = PendulumModel {
+        m_q: 0.952,
+        m_p: 0.3,
+        l: 1.5,
+        c: 0.002,
+    };
+    let m = pendulum_delay_model(&p, 0.03, 50, 2, 7).expect("bench model");
+    let mut g = c.benchmark_group("tracking_step");
+    g.measurement_time(Duration::from_secs(3)).sample_size(20);
+    g.bench_function("2axis/preview", |b| {
+        b.iter_custom(|iters| tracking_ticks(&m, iters as usize).into_iter().sum())
+    });
+    g.finish();
+    let mut t = tracking_ticks(&m, 3000);
+    t.sort();
+    let us = |d: Duration| d.as_secs_f64() * 1e6;
+    println!(
+        "\ntracking MPC with preview (q = 50, 2 axes, guidance and preview included): \
+         median {:.2} µs  p99 {:.2} µs  max {:.2} µs ({} ticks)",
+        us(t[t.len() / 2]),
+        us(t[t.len() * 99 / 100]),
+        us(t[t.len() - 1]),
+        t.len()
+    );
 }
 
 criterion_group!(benches, bench);

@@ -18,6 +18,11 @@ spec as plain data and returns plain rows.
   excess in the same sample and >= 1 deg·s: the controller does not damp the swing.
 
 PX4 PID is flown as the reference; it is held to the rules but the last.
+
+A mission campaign (``[base.mission]``) flies the sample's random plan instead of the step:
+``pid`` is PX4's mission mode, ``mpc`` the position MPC along legs shaped against the model's
+swing (:func:`swingrt.mission.shaped_legs`); the rows carry the mission's summary
+(:data:`swingrt.mission.SUMMARY_COLUMNS`) and fail by :func:`swingrt.mission.mission_failure`.
 """
 
 from __future__ import annotations
@@ -25,6 +30,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from swingrt.methods import METHODS
 from swingrt.metrics import METRICS, step_metrics
@@ -46,8 +53,13 @@ EXCESS = "swing_excess_iae_deg_s"
 RATIO = "swing_excess_vs_pid"
 
 
-def metric_columns() -> tuple[str, ...]:
-    """Every metric column: ``metrics.csv``'s, then the excess relative to PID's."""
+def metric_columns(mission: bool = False) -> tuple[str, ...]:
+    """Every metric column: ``metrics.csv``'s, then the excess relative to PID's; for a
+    mission campaign the mission's summary columns."""
+    if mission:
+        from swingrt.mission import SUMMARY_COLUMNS
+
+        return SUMMARY_COLUMNS
     return (*METRICS, RATIO)
 
 
@@ -127,13 +139,15 @@ def fly_sample(
     seed = spec.flight_seed(index)
     common: dict[str, Any] = {"sample": index, "flight_seed": seed, **param_columns(values)}
     ident: dict[str, Any] = {c: None for c in IDENT_COLUMNS}
-    nan_metrics = {m: math.nan for m in metric_columns()}
+    nan_metrics = {m: math.nan for m in metric_columns(spec.is_mission)}
+    plan = None
     traces: dict[str, Any] = {}
     setup_error = ident_error = ""
     model = lqr = None
     trained: dict[str, Any] = {}
     try:
         exp = spec.experiment(values, label=f"{spec.name} #{index}")
+        plan = spec.mission(values, index)
         axis = "ne" if exp.axes == "ne" else "n"
         train_sc = training_scenario(exp, {}, seed)
         ev_sc = evaluation_scenario(exp, {}, seed + 1, train_sc)
@@ -196,6 +210,11 @@ def fly_sample(
         if blocked:
             rows.append({**row, **nan_metrics, "error": blocked})
             continue
+        if plan is not None:
+            tracking = {"mpc": exp.mpc} if exp.mpc else None
+            row.update(_fly_mission(plan, ctrl, ev_sc, seed + 1, model, tracking, traces, out))
+            rows.append(row)
+            continue
         try:
             trace, extras = simulate_controller(
                 ev_sc,
@@ -222,11 +241,65 @@ def fly_sample(
             row["error"] = f"{type(exc).__name__}: {exc}"
         rows.append(row)
     pid = next((r for r in rows if r["controller"] == "pid"), None)
+    if plan is not None:
+        _judge_missions(rows, pid)
+        return rows, traces
     for row in rows:
         ref = math.nan if pid is None else pid.get(EXCESS, math.nan)
         row[RATIO] = row[EXCESS] / ref if ref and ref > 0 else math.nan
         row["failure"] = failure_reason(row)
     return rows, traces
+
+
+def _fly_mission(
+    plan: Any,
+    ctrl: str,
+    scenario: Any,
+    seed: int,
+    model: Any,
+    tracking: dict[str, Any] | None,
+    traces: dict[str, Any],
+    out: Path | None,
+) -> dict[str, Any]:
+    """Fly a mission sample's plan with ``ctrl`` (PX4's mission mode for ``pid``, the
+    position MPC with ``tracking`` settings on shaped legs for ``mpc``); its summary columns,
+    with the per-waypoint rows under ``_waypoints`` for :func:`_judge_missions`."""
+    from swingrt import mission as ms
+    from swingrt.io.flight import Trace
+
+    try:
+        if ctrl == "pid":
+            trace, events = ms.fly(plan, "px4", scenario, seed=seed)
+        else:
+            legs = ms.shaped_legs(model)
+            trace, events = ms.fly(plan, legs, scenario, seed=seed, model=model, tracking=tracking)
+        rows = ms.waypoint_report(plan, trace, events)
+        total = max(t for t, _, k in events if k == "completed")
+        cols: dict[str, Any] = ms.summary(rows, total, trace)
+        cols["fallback"] = "handed back to PX4" if np.any(trace.get("fallback", 0) > 0) else ""
+        traces[ctrl] = Trace(trace, meta={"mission_events": [list(e) for e in events]})
+        if out is not None:
+            traces[ctrl].to_parquet(out / f"{ctrl}.parquet")
+        return {**cols, "_waypoints": rows}
+    except BaseException as exc:  # a mission that fails is its row's error
+        if _fatal(exc):
+            raise
+        return {c: math.nan for c in metric_columns(True)} | {
+            "error": f"{type(exc).__name__}: {exc}",
+            "_waypoints": [],
+        }
+
+
+def _judge_missions(rows: list[dict[str, Any]], pid: dict[str, Any] | None) -> None:
+    """Each mission row's ratios to PX4's own flight of the sample, and its failure."""
+    from swingrt import mission as ms
+
+    legs = {r["controller"]: r.pop("_waypoints", []) for r in rows}
+    theirs = None if pid is None or pid.get("error") else pid
+    for row in rows:
+        ref = None if theirs is None else legs["pid"]
+        row.update(ms.compare(row, legs[row["controller"]], theirs, ref))
+        row["failure"] = ms.mission_failure(row, judged=row["controller"] != "pid")
 
 
 #: Seconds of training flight a controller's design read (PID: none); wall-clock times

@@ -51,21 +51,30 @@ def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
 
 def param_names(rows: Sequence[dict[str, Any]]) -> list[str]:
     """The sampled parameter columns of the rows, in column order."""
-    skip = _NOT_PARAMS | set(IDENT_COLUMNS) | set(DATA_COLUMNS) | set(metric_columns())
+    skip = _NOT_PARAMS | set(IDENT_COLUMNS) | set(DATA_COLUMNS)
+    skip |= set(metric_columns()) | set(metric_columns(True))
     return [k for k in (rows[0] if rows else {}) if k not in skip]
 
 
-def _swing_metric() -> str:
+def _swing_metric(mission: bool = False) -> str:
+    if mission:
+        return "leg_swing_max_deg"
     cols = metric_columns()
     return "swing_excess_iae_deg_s" if "swing_excess_iae_deg_s" in cols else "swing_iae_deg_s"
 
 
-def worst_samples(rows: Sequence[dict[str, Any]], n: int = WORST) -> list[dict[str, Any]]:
+def _settle_metric(mission: bool) -> str:
+    return "settle_1deg_s" if mission else "v_settle_s"
+
+
+def worst_samples(
+    rows: Sequence[dict[str, Any]], n: int = WORST, mission: bool = False
+) -> list[dict[str, Any]]:
     """The ``n`` worst samples: most failed controllers first (PID counted only when it was
     the only one flown), then the largest swing metric among those controllers."""
     ctrls = {r["controller"] for r in rows}
     judged = ctrls - {"pid"} or ctrls
-    metric = _swing_metric()
+    metric = _swing_metric(mission)
     by: dict[int, dict[str, Any]] = {}
     for r in rows:
         if r["controller"] not in judged:
@@ -89,7 +98,12 @@ def _fmt(v: Any) -> str:
 
 
 def _plots(
-    out: Path, rows: list[dict[str, Any]], ctrls: list[str], params: list[str], logs: set[str]
+    out: Path,
+    rows: list[dict[str, Any]],
+    ctrls: list[str],
+    params: list[str],
+    logs: set[str],
+    mission: bool = False,
 ) -> list[str]:
     """Write the figures; ``logs``: the parameters drawn log-uniformly (log axis)."""
     from swingrt.reports.plots import _STYLE, _pyplot, save_figure
@@ -98,7 +112,7 @@ def _plots(
     from matplotlib.ticker import NullFormatter
 
     written = []
-    metrics = list(metric_columns())
+    metrics = list(metric_columns(mission))
     ncol = 3
     nrow = math.ceil(len(metrics) / ncol)
     fig, axes = plt.subplots(nrow, ncol, figsize=(4.2 * ncol, 3.2 * nrow), squeeze=False)
@@ -118,7 +132,7 @@ def _plots(
     fig.tight_layout()
     save_figure(fig, out / "metrics.png", dpi=100, tight=False)
     written.append("metrics.png")
-    swing = _swing_metric()
+    swing = _swing_metric(mission)
     for p in params:
         vals = [r.get(p) for r in rows]
         if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in vals):
@@ -126,7 +140,7 @@ def _plots(
         if len({float(v) for v in vals if v is not None}) < 2:
             continue
         fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), squeeze=False)
-        for j, m in enumerate((swing, "v_settle_s")):
+        for j, m in enumerate((swing, _settle_metric(mission))):
             ax = axes[0, j]
             for c in ctrls:
                 sel = [r for r in rows if r["controller"] == c]
@@ -148,10 +162,36 @@ def _plots(
     return written
 
 
+def _rules(mission: bool) -> str:
+    """The failure rules the report's rates count, in one paragraph."""
+    if not mission:
+        return (
+            "A flight **fails** when the sample raised an error, the controller fell back to "
+            "PX4 PID, it diverged (a NaN metric or a peak swing above "
+            f"{DIVERGED_SWING_DEG:g}°), the velocity never settled within 5 % of the step, "
+            f"the steady-state error is ≥ {SS_ERROR_LIMIT} m/s, or (LQR, MPC) the swing IAE's "
+            f"excess above its floor is ≥ {SWING_EXCESS_RATIO:g}× PID's in the same sample and "
+            f"≥ {SWING_EXCESS_MIN:g} deg·s. Intervals: 95 % Wilson."
+        )
+    from swingrt import mission as ms
+
+    return (
+        "The evaluation flight is the sample's random plan; `pid` is PX4's mission mode. A "
+        "flight **fails** when the sample raised an error, the controller fell back to PX4, "
+        f"it diverged (a peak swing above {ms.DIVERGED_SWING_DEG:g}°), after some arrival the "
+        f"swing was not within {ms.SETTLED_DEG:g}° within {ms.SETTLE_LIMIT_S:g} s for the "
+        f"rest of the hold (`settle`), the vehicle left {ms.HOLD_LIMIT_M:g} m of a waypoint "
+        f"during its hold (`hold`), or (MPC) the plan took more than "
+        f"{ms.TIME_RATIO_LIMIT:g}× PX4's time (`slow`) or some leg's largest swing was more "
+        f"than {ms.LEG_SWING_RATIO:g}× PX4's on that leg (`swing`). Intervals: 95 % Wilson."
+    )
+
+
 def write_report(out: str | os.PathLike[str], spec: CampaignSpec, figures: bool = True) -> Path:
     """Write ``report.md`` (and the figures) from the dataset in ``out``."""
     out = Path(out)
     rows = read_rows(out)
+    mission = spec.is_mission
     ctrls = [c for c in spec.controllers if any(r["controller"] == c for r in rows)]
     params = param_names(rows)
     done = len({r["sample"] for r in rows})
@@ -165,12 +205,7 @@ def write_report(out: str | os.PathLike[str], spec: CampaignSpec, figures: bool 
         "",
         "## Failure rates",
         "",
-        "A flight **fails** when the sample raised an error, the controller fell back to "
-        "PX4 PID, it diverged (a NaN metric or a peak swing above "
-        f"{DIVERGED_SWING_DEG:g}°), the velocity never settled within 5 % of the step, "
-        f"the steady-state error is ≥ {SS_ERROR_LIMIT} m/s, or (LQR, MPC) the swing IAE's "
-        f"excess above its floor is ≥ {SWING_EXCESS_RATIO:g}× PID's in the same sample and "
-        f"≥ {SWING_EXCESS_MIN:g} deg·s. Intervals: 95 % Wilson.",
+        _rules(mission),
         "",
         "| controller | flights | failed | rate | 95 % CI | reasons |",
         "|---|---:|---:|---:|---|---|",
@@ -197,7 +232,7 @@ def write_report(out: str | os.PathLike[str], spec: CampaignSpec, figures: bool 
         "| metric | " + " | ".join(ctrls) + " |",
         "|---|" + "---|" * len(ctrls),
     ]
-    for m in metric_columns():
+    for m in metric_columns(mission):
         cells = []
         for c in ctrls:
             v = np.asarray([r[m] for r in rows if r["controller"] == c], dtype=float)
@@ -211,18 +246,18 @@ def write_report(out: str | os.PathLike[str], spec: CampaignSpec, figures: bool 
             cells.append(cell + (f" (∞ ×{inf})" if inf else ""))
         lines.append(f"| {m} | " + " | ".join(cells) + " |")
     logs = {k for k, d in spec.vary.items() if d.kind == "loguniform"}
-    figs = _plots(out, rows, ctrls, params, logs) if figures and rows else []
+    figs = _plots(out, rows, ctrls, params, logs, mission) if figures and rows else []
     if figs:
         lines += ["", "## Figures", ""]
         lines += [f"![{f}]({f})" for f in figs]
-    worst = worst_samples(rows)
+    worst = worst_samples(rows, mission=mission)
     lines += [
         "",
         f"## The {len(worst)} worst samples",
         "",
-        f"Most failed controllers first, then the largest {_swing_metric()}.",
+        f"Most failed controllers first, then the largest {_swing_metric(mission)}.",
         "",
-        "| sample | failed | " + _swing_metric() + " | parameters | replay |",
+        "| sample | failed | " + _swing_metric(mission) + " | parameters | replay |",
         "|---:|---|---:|---|---|",
     ]
     by_sample = {r["sample"]: r for r in rows}

@@ -99,7 +99,7 @@ def _table(rows: Sequence[dict[str, Any]]) -> Any:
         if typ is None and c not in _TYPES:
             from swingrt.campaign.flight import metric_columns
 
-            if c in metric_columns():
+            if c in metric_columns() or c in metric_columns(True):
                 typ = "float64"
         arrays[c] = pa.array(values, type=pa.type_for_alias(typ) if typ else None)
     return pa.table(arrays)

@@ -13,11 +13,17 @@ Top-level keys:
   (``[shaper]``, ``[payload_p]``, ``[deepc]``, ``[nmpc]``, ``[sindy]``), ``tick_budget`` (no
   ``name``, ``controllers``,
   ``grid``: the campaign owns those);
+- ``[base.mission]``: the evaluation flight is a mission instead of the step: a random
+  delivery plan per sample (the fields of ``_core.Mission.random``: ``waypoints``,
+  ``leg_min``, ``leg_max``, ``speed``, ``hold``, ``acceptance_radius``, ``altitude``,
+  ``turn_max``; its seed is the sample's), flown by PX4's mission mode (``pid``) and by the
+  position MPC along legs shaped against the model's swing (``mpc``); ``axes`` must be
+  ``ne``, and the rows carry :data:`swingrt.mission.SUMMARY_COLUMNS`;
 - ``[vary]``: dotted field → distribution (:mod:`swingrt.campaign.sampling`).
 
 A dotted ``[vary]`` key addresses:
 
-- ``identify.X``, ``mpc.X``, ``lqr.X``: those settings sections;
+- ``identify.X``, ``mpc.X``, ``lqr.X``, ``mission.X``: those settings sections;
 - ``training.X`` / ``evaluation.X``: a scenario field of that flight only;
 - ``duration``, ``training_duration``, ``step.X``: the experiment's own keys;
 - anything else (``payload.mass``, ``wind.velocity``, ``noise.swing_std``, …): a scenario
@@ -60,9 +66,21 @@ _BASE_KEYS = {
     "mpc",
     "lqr",
     "tick_budget",
+    "mission",
     *METHOD_SECTIONS,
 }
-_SECTIONS = ("identify", "mpc", "lqr", "training", "evaluation", "step", *METHOD_SECTIONS)
+_SECTIONS = (
+    "identify",
+    "mpc",
+    "lqr",
+    "training",
+    "evaluation",
+    "step",
+    "mission",
+    *METHOD_SECTIONS,
+)
+#: The controllers a mission campaign flies: PX4's mission mode and the position MPC.
+MISSION_CONTROLLERS = ("pid", "mpc")
 _SCALARS = ("duration", "training_duration")
 #: How many draws :func:`load_spec` validates in the core besides the bounds.
 CHECK_DRAWS = 4
@@ -105,9 +123,31 @@ class CampaignSpec:
 
         return draw(self.vary, self.seed, index)
 
+    @property
+    def is_mission(self) -> bool:
+        """Whether the evaluation flight is a mission (``[base.mission]``)."""
+        return "mission" in self.base
+
+    def mission(self, values: dict[str, Any], index: int) -> Any:
+        """The random plan of sample ``index`` (``[base.mission]`` with ``values`` applied,
+        seeded by the sample), or None when the evaluation is the step."""
+        if not self.is_mission:
+            return None
+        from swingrt import _core
+
+        plan = dict(apply_values(self.base, values)["mission"])
+        plan["seed"] = self.flight_seed(index)
+        try:
+            return _core.Mission.random(plan)
+        except ConfigError as exc:
+            msg = str(exc).replace("random.", "mission.", 1)
+            field = (exc.field or "").replace("random", "mission", 1)
+            raise ConfigError(msg, field=field) from None
+
     def experiment(self, values: dict[str, Any], label: str = "") -> Experiment:
         """The experiment of one sample: ``values`` (dotted) applied to ``[base]``."""
         d = apply_values(self.base, values)
+        d.pop("mission", None)
         d["name"] = label or self.name
         d["controllers"] = list(self.controllers)
         return Experiment.from_dict(d, label or self.name)
@@ -205,6 +245,24 @@ def parse_spec(d: dict[str, Any], source: str = "spec") -> CampaignSpec:
         bad = sorted(set(base) - _BASE_KEYS)
         if bad:
             raise ConfigError(f"base.{bad[0]}: unknown key", field=f"base.{bad[0]}")
+        mission = base.get("mission")
+        if mission is not None:
+            if not isinstance(mission, dict) or "seed" in mission:
+                raise ConfigError(
+                    "base.mission: a table of the random plan's fields (its seed is the sample's)",
+                    field="base.mission",
+                )
+            if base.get("axes") != "ne":
+                raise ConfigError(
+                    'base.axes: a mission flies both axes; set axes = "ne"', field="base.axes"
+                )
+            for c in ctrls:
+                if c not in MISSION_CONTROLLERS:
+                    raise ConfigError(
+                        f"controllers: {c!r} does not fly missions (they fly "
+                        f"{', '.join(MISSION_CONTROLLERS)})",
+                        field="controllers",
+                    )
         vary_raw = d.get("vary", {})
         if not isinstance(vary_raw, dict):
             raise ConfigError("vary: must be a table of dotted keys", field="vary")
@@ -238,9 +296,10 @@ def check_spec(spec: CampaignSpec, source: str = "spec", draws: int = CHECK_DRAW
         trials.append((f"the {which} bounds", {k: bound(v, which) for k, v in spec.vary.items()}))
     for i in range(min(draws, spec.samples)):
         trials.append((f"sample {i}", spec.draw(i)))
-    for what, values in trials:
+    for i, (what, values) in enumerate(trials):
         try:
             spec.experiment(values, label=what)
+            spec.mission(values, i)
         except ConfigError as exc:
             msg = str(exc)
             for prefix in (f"{what}: ", f"case {what}: "):

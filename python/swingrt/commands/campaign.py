@@ -38,7 +38,7 @@ def _rerun(folder: str, index_text: str) -> int:
     from swingrt.campaign.results import read_rows, stored_spec
     from swingrt.campaign.spec import parse_spec
     from swingrt.errors import ConfigError
-    from swingrt.reports.plots import plot_case
+    from swingrt.reports.plots import plot_case, plot_mission
 
     try:
         index = int(index_text)
@@ -52,7 +52,11 @@ def _rerun(folder: str, index_text: str) -> int:
     out.mkdir(parents=True, exist_ok=True)
     rows, traces = fly_sample(raw, index, out)
     exp_axes = spec.base.get("axes", "n")
-    if traces:
+    plan = spec.mission(spec.draw(index), index)
+    if traces and plan is not None:
+        flights = {c: (tr.columns, tr.meta["mission_events"]) for c, tr in traces.items()}
+        plot_mission(out / "sample.png", f"{spec.name} sample {index}", plan.items, flights)
+    elif traces:
         plot_case(out / "sample.png", f"{spec.name} sample {index}", traces, exp_axes)
     from swingrt.reports.tables import csv_text
 
@@ -62,7 +66,7 @@ def _rerun(folder: str, index_text: str) -> int:
     for r in rows:
         print(
             f"sample {index} {r['controller']:4s} "
-            + ", ".join(f"{m} {r[m]:.4g}" for m in metric_columns())
+            + ", ".join(f"{m} {r[m]:.4g}" for m in metric_columns(spec.is_mission))
             + (f"  FAIL ({r['failure']})" if r["failure"] else "")
         )
         old = stored.get(r["controller"])

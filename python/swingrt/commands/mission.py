@@ -26,10 +26,15 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument(
         "--model",
         help="identified model (both axes): also fly the position MPC with preview on it "
-        "along swingrt's legs (reported as mpc)",
+        "along swingrt's legs shaped against the model's swing period (reported as mpc)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of every random generator")
     p.add_argument("-o", "--output", help="write the per-waypoint rows as JSON here")
+    p.add_argument(
+        "--figure",
+        help="write the figure here (.png/.pdf/.svg): the paths seen from above and the "
+        "swing against time with the arrivals marked",
+    )
     return p
 
 
@@ -48,16 +53,38 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError(f"--guidance: {g!r} is not one of {', '.join(GUIDANCES)}")
     m = ms.load(args.plan)
     scenario = read_toml(args.scenario) if args.scenario else None
-    flights: list[tuple[str, str, _core.LinearModel | None]] = [(g, g, None) for g in chosen]
+    flights: list[tuple[str, str | dict, _core.LinearModel | None]] = [(g, g, None) for g in chosen]
     if args.model:
-        flights.append(("mpc", "smooth", _core.LinearModel.load(args.model)))
-    out = {}
+        identified = _core.LinearModel.load(args.model)
+        flights.append(("mpc", ms.shaped_legs(identified), identified))
+    out: dict[str, dict] = {}
+    flown = {}
     for name, g, model in flights:
         trace, events = ms.fly(m, g, scenario, seed=args.seed, model=model)
         rows = ms.waypoint_report(m, trace, events)
         total = max(t for t, _, k in events if k == "completed")
         print(ms.format_report(name, rows, total))
-        out[name] = {"total_s": total, "waypoints": rows}
+        out[name] = {"total_s": total, "waypoints": rows, "summary": ms.summary(rows, total, trace)}
+        flown[name] = (trace, events)
+    px4 = out.get("px4")
+    for name, flight in out.items():
+        flight["summary"].update(
+            ms.compare(
+                flight["summary"],
+                flight["waypoints"],
+                None if px4 is None else px4["summary"],
+                None if px4 is None else px4["waypoints"],
+            )
+        )
+        failure = ms.mission_failure(flight["summary"], judged=name != "px4")
+        flight["failure"] = failure
+    if px4 is not None and len(out) > 1:
+        print(ms.format_comparison(out))
     if args.output:
         write_text_atomic(args.output, json.dumps(out, indent=1))
+    if args.figure:
+        from swingrt.reports.plots import plot_mission
+
+        plot_mission(args.figure, f"mission {m.name!r}", m.items, flown)
+        print(f"wrote {args.figure}")
     return 0

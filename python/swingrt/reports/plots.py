@@ -6,7 +6,9 @@
 * :func:`plot_case` — an experiment case: velocity, swing and acceleration setpoint against
   time, controllers overlaid (figures 5.11–5.22);
 * :func:`plot_prediction` — the MPC's predicted trajectory at the step against the one flown
-  (figures 5.20–5.21).
+  (figures 5.20–5.21);
+* :func:`plot_mission` — a mission: the vehicle's and the payload's paths seen from above,
+  and the swing against time with the arrivals marked, flights overlaid.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "plot_case",
+    "plot_mission",
     "plot_pareto",
     "plot_prediction",
     "plot_sample_time",
@@ -107,7 +110,13 @@ def plot_sample_time(rows: list[dict[str, Any]], path: str | os.PathLike[str]) -
     save_figure(fig, path, dpi=110, tight=False)
 
 
-_STYLE = {"pid": ("tab:gray", "PX4 PID"), "lqr": ("tab:blue", "LQR"), "mpc": ("tab:red", "MPC")}
+_STYLE = {
+    "pid": ("tab:gray", "PX4 PID"),
+    "lqr": ("tab:blue", "LQR"),
+    "mpc": ("tab:red", "MPC"),
+    "px4": ("tab:gray", "PX4 mission mode"),
+    "smooth": ("tab:green", "swingrt's legs under PX4"),
+}
 
 
 def plot_case(
@@ -165,5 +174,59 @@ def plot_prediction(
         a.grid(alpha=0.3)
     ax[0].legend()
     fig.suptitle(f"MPC prediction at t = {prediction['t0']:.2f} s vs flown")
+    fig.tight_layout()
+    save_figure(fig, path, dpi=110, tight=False)
+
+
+def plot_mission(
+    path: str | os.PathLike[str],
+    title: str,
+    items: list[dict[str, Any]],
+    flights: dict[str, tuple[dict[str, Any], list[tuple[float, int, str]]]],
+) -> None:
+    """A mission seen from above (East right, North up: the vehicle solid, the payload thin,
+    each waypoint with its acceptance circle) and the swing from vertical against time with
+    each flight's arrivals marked; ``flights``: name → (trace columns, mission events)."""
+    plt = _pyplot()
+    fig, (top, swing) = plt.subplots(
+        1, 2, figsize=(13, 5.2), gridspec_kw={"width_ratios": [1, 1.4]}
+    )
+    for name, (tr, events) in flights.items():
+        color, label = _STYLE.get(name, (None, name))
+        line = top.plot(tr["pe"], tr["pn"], color=color, lw=1.4, label=f"{label}: vehicle")
+        color = line[0].get_color()
+        top.plot(
+            tr["payload_pe"],
+            tr["payload_pn"],
+            color=color,
+            lw=0.7,
+            alpha=0.7,
+            ls="--",
+            label=f"{label}: payload",
+        )
+        sn = np.asarray(tr.get("swing_true_n", tr["swing_n"]))
+        se = np.asarray(tr.get("swing_true_e", tr["swing_e"]))
+        swing.plot(tr["t"], np.degrees(np.hypot(sn, se)), color=color, lw=1.0, label=label)
+        for t_in, i, kind in events:
+            if kind == "reached" and i > 0:
+                swing.axvline(t_in, color=color, lw=0.8, ls=":")
+    for i, it in enumerate(items):
+        n, e = it["position"][0], it["position"][1]
+        top.plot(e, n, "kx", ms=7)
+        top.annotate(str(i), (e, n), textcoords="offset points", xytext=(5, 5), fontsize=8)
+        r = float(it.get("acceptance_radius") or 0.0)
+        if r > 0:
+            top.add_patch(plt.Circle((e, n), r, fill=False, color="k", lw=0.6))
+    top.set_xlabel("East [m]")
+    top.set_ylabel("North [m]")
+    top.set_aspect("equal", adjustable="datalim")
+    top.grid(alpha=0.3)
+    top.legend(fontsize=7, loc="best")
+    swing.axhline(1.0, color="k", lw=0.6, ls="--")
+    swing.set_xlabel("t [s] (dotted: arrival at a waypoint)")
+    swing.set_ylabel("swing from vertical [deg]")
+    swing.grid(alpha=0.3)
+    swing.legend(fontsize=8)
+    fig.suptitle(title)
     fig.tight_layout()
     save_figure(fig, path, dpi=110, tight=False)

@@ -13,7 +13,10 @@
 //!   PX4 counts it — and the next leg starts when the hold is over (never before the
 //!   reference itself has arrived). The whole future is a closed form, so the preview is
 //!   exact up to the one unknown, the vehicle's arrival: until it is seen, the preview
-//!   assumes the vehicle arrives with the reference (or now, if later).
+//!   assumes the vehicle arrives with the reference (or now, if later). The preview ends
+//!   at the first hold ahead: beyond it the reference stays on that item, so that a
+//!   controller planning ahead keeps the vehicle and payload still for the whole hold
+//!   (a delivery's drop) instead of leaning into the next leg before the hold is over.
 //! * [`super::px4::Px4Guidance`]: PX4's own mission behaviour (its navigator and
 //!   jerk-limited trajectory), the baseline.
 
@@ -350,8 +353,9 @@ impl SmoothGuidance {
         (arrival + self.mission.items[j].hold).max(ref_end)
     }
 
-    /// The reference at time `tau` as known at time `now`.
-    fn reference(&self, tau: f64, now: f64) -> TrajectorySetpoint {
+    /// The reference at time `tau` as known at time `now`; with `past_holds` false, at rest
+    /// on the first item with a hold ahead for every `tau` after that hold (the preview).
+    fn reference(&self, tau: f64, now: f64, past_holds: bool) -> TrajectorySetpoint {
         if !self.started {
             return TrajectorySetpoint::at_rest(self.start_pos);
         }
@@ -366,6 +370,9 @@ impl SmoothGuidance {
             let end = self.hold_end(j, dep, arrived, now);
             if tau < end || j + 1 == self.legs.len() {
                 return self.legs[j].at(tau - dep);
+            }
+            if !past_holds && self.mission.items[j].hold > 0.0 {
+                return TrajectorySetpoint::at_rest(self.mission.items[j].position);
             }
             j += 1;
             dep = end;
@@ -437,12 +444,12 @@ impl Guidance for SmoothGuidance {
                 self.arrived = None;
             }
         }
-        self.reference(t, t)
+        self.reference(t, t, true)
     }
 
     fn preview(&self, t: f64, dt: f64, out: &mut [TrajectorySetpoint]) {
         for (k, o) in out.iter_mut().enumerate() {
-            *o = self.reference(t + k as f64 * dt, t);
+            *o = self.reference(t + k as f64 * dt, t, false);
         }
     }
 
@@ -562,13 +569,23 @@ mod tests {
         assert_eq!(sp.p, [30.0, 0.0, -10.0]);
         g.preview(t_end, dt, &mut out);
         assert!(out.iter().all(|o| o.p == [30.0, 0.0, -10.0]));
-        // It arrives: the next leg starts 5 s later, which the preview now shows.
+        // It arrives: the next leg starts 5 s later. Until the hold is over the preview
+        // stays on the waypoint, past the hold's end too (a hold is held still), and once
+        // it is over the preview is the next leg.
         g.update(t_end + dt, dt, &[29.8, 0.0, -10.0], &[0.0; 3]);
+        g.update(t_end + 3.0, dt, &[30.0, 0.0, -10.0], &[0.0; 3]);
         g.preview(t_end + 3.0, dt, &mut out);
+        assert!(out
+            .iter()
+            .all(|o| o.p == [30.0, 0.0, -10.0] && o.v == [0.0; 3]));
         let departs = t_end + dt + 5.0;
+        let sp = g.update(departs + 0.5, dt, &[30.0, 0.0, -10.0], &[0.0; 3]);
+        assert!(sp.p[1] > 0.0, "the next leg started");
+        g.preview(departs + 0.5, dt, &mut out);
+        let next = SCurve::new(40.0, 5.0, 1.6, 1.6);
         for (k, o) in out.iter().enumerate() {
-            let tau = t_end + 3.0 + k as f64 * dt;
-            assert_eq!(o.p[1] > 0.0, tau > departs + 1e-9, "tau {tau}");
+            let q = next.at(0.5 + k as f64 * dt);
+            assert!((o.p[1] - q.s).abs() < 1e-9, "k {k}");
         }
     }
 }
