@@ -250,3 +250,22 @@ def test_swingrt_mission_draws_the_paths_and_the_swing(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "against PX4's mission mode" in out and f"wrote {fig}" in out
     assert fig.stat().st_size > 20_000 and fig.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_swingrt_mission_refuses_a_one_axis_model_and_an_unknown_figure_format(tmp_path, capsys):
+    from swingrt.cli import main
+    from swingrt.sysid import identify
+
+    (tmp_path / "square.toml").write_text(SQUARE)
+    fig = tmp_path / "mission.xyz"
+    assert main(["mission", str(tmp_path / "square.toml"), "--figure", str(fig)]) == 2
+    assert "--figure" in capsys.readouterr().err and not fig.exists()
+    from swingrt import mission as ms
+
+    trace, _ = ms.fly(_core.Mission.from_text(SQUARE, "toml"), "px4")
+    north = identify(trace, axes="n", delays=10, test_span=8.0)
+    north.save(str(tmp_path / "north.json"))
+    args = ["mission", str(tmp_path / "square.toml"), "--model", str(tmp_path / "north.json")]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "a mission flies both axes" in err and "acc_sp_n" in err and err.count("\n") == 1

@@ -18,6 +18,7 @@ waypoint of each column) and the rules a mission flight is judged by in campaign
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -80,6 +81,24 @@ def load(path: str) -> _core.Mission:
     return _core.Mission.from_text(Path(path).read_text(encoding="utf-8"), kind)
 
 
+def true_swing(trace: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+    """The cable's true angles (North, East) [rad] of a flight: the simulator's truth where
+    the trace has it, else the measured swing."""
+    sn = trace.get("swing_true_n", trace["swing_n"])
+    se = trace.get("swing_true_e", trace["swing_e"])
+    return np.asarray(sn, dtype=float), np.asarray(se, dtype=float)
+
+
+def check_model(model: _core.LinearModel) -> None:
+    """Refuse, naming its inputs, a model that cannot fly a mission (one axis only)."""
+    if len(model.inputs) != 2:
+        raise ConfigError(
+            f"model: a mission flies both axes, and this model has the inputs "
+            f"{', '.join(model.inputs)} (identify a two-axis flight with --axes ne)",
+            field="model",
+        )
+
+
 def shaped_legs(model: _core.LinearModel) -> dict[str, Any]:
     """swingrt's leg settings shaped against the swing ``model`` identified: the jerk ramps
     of every acceleration change last one swing period (:func:`swingrt.sysid.swing_period`),
@@ -110,6 +129,8 @@ def fly(
     one is given (``tracking``: its settings, ``TrackingSettings``); returns the trace and
     the mission's events.
     The flight ends at the last hold's end (or fails after a time limit)."""
+    if model is not None:
+        check_model(model)
     items = mission.items
     legs = sum(
         math.dist(a["position"], b["position"]) / max(b["speed"] or 1.0, 0.1)
@@ -142,8 +163,7 @@ def waypoint_report(
     hold (residual swing, settling) about the payload's hang there: the mean angle over the
     hold's second half, which a steady wind leans off vertical."""
     t = trace["t"]
-    sn = trace.get("swing_true_n", trace["swing_n"])
-    se = trace.get("swing_true_e", trace["swing_e"])
+    sn, se = true_swing(trace)
     swing = np.degrees(np.hypot(sn, se))
     pos = np.stack([trace["pn"], trace["pe"]], axis=1)
     pay = np.stack([trace["payload_pn"], trace["payload_pe"]], axis=1)
@@ -220,8 +240,7 @@ def summary(
         vals = [math.inf if math.isnan(r[col]) else r[col] for r in legs]
         return float(max(vals, default=0.0))
 
-    sn = trace.get("swing_true_n", trace["swing_n"])
-    se = trace.get("swing_true_e", trace["swing_e"])
+    sn, se = true_swing(trace)
     return {
         "total_s": float(total),
         **{c: worst(c) for c in SUMMARY_COLUMNS[1:7]},

@@ -5,10 +5,13 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
 from swingrt.errors import ConfigError
 
 GUIDANCES = ("px4", "smooth")
+#: Formats ``--figure`` writes, by the file's suffix.
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
@@ -51,11 +54,17 @@ def run(args: argparse.Namespace) -> int:
     for g in chosen:
         if g not in GUIDANCES:
             raise ConfigError(f"--guidance: {g!r} is not one of {', '.join(GUIDANCES)}")
+    if args.figure and Path(args.figure).suffix.lower() not in FIGURE_SUFFIXES:
+        raise ConfigError(
+            f"--figure: {args.figure!r} must end in {', '.join(FIGURE_SUFFIXES)}",
+            field="figure",
+        )
     m = ms.load(args.plan)
     scenario = read_toml(args.scenario) if args.scenario else None
     flights: list[tuple[str, str | dict, _core.LinearModel | None]] = [(g, g, None) for g in chosen]
     if args.model:
         identified = _core.LinearModel.load(args.model)
+        ms.check_model(identified)
         flights.append(("mpc", ms.shaped_legs(identified), identified))
     out: dict[str, dict] = {}
     flown = {}

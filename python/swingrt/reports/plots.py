@@ -187,6 +187,8 @@ def plot_mission(
     """A mission seen from above (East right, North up: the vehicle solid, the payload thin,
     each waypoint with its acceptance circle) and the swing from vertical against time with
     each flight's arrivals marked; ``flights``: name → (trace columns, mission events)."""
+    from swingrt.mission import true_swing
+
     plt = _pyplot()
     fig, (top, swing) = plt.subplots(
         1, 2, figsize=(13, 5.2), gridspec_kw={"width_ratios": [1, 1.4]}
@@ -204,8 +206,7 @@ def plot_mission(
             ls="--",
             label=f"{label}: payload",
         )
-        sn = np.asarray(tr.get("swing_true_n", tr["swing_n"]))
-        se = np.asarray(tr.get("swing_true_e", tr["swing_e"]))
+        sn, se = true_swing(tr)
         swing.plot(tr["t"], np.degrees(np.hypot(sn, se)), color=color, lw=1.0, label=label)
         for t_in, i, kind in events:
             if kind == "reached" and i > 0:
