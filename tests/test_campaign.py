@@ -451,7 +451,7 @@ def _mission_study(**over) -> dict:
     return {
         "name": "m",
         "samples": 2,
-        "controllers": ["pid", "mpc"],
+        "controllers": ["pid", "mpc", "lqr"],
         "base": base,
         "vary": {"payload.length": {"dist": "uniform", "low": 0.8, "high": 1.6}},
     } | over
@@ -460,7 +460,7 @@ def _mission_study(**over) -> dict:
 @pytest.mark.parametrize(
     ("change", "named"),
     [
-        ({"controllers": ["pid", "lqr", "mpc"]}, "'lqr' does not fly missions"),
+        ({"controllers": ["pid", "deepc", "mpc"]}, "'deepc' does not fly missions"),
         ({"base": {"mission": dict(MISSION_PLAN)}}, 'axes = "ne"'),
         ({"base": {"axes": "ne", "mission": {**MISSION_PLAN, "seed": 1}}}, "seed is the sample"),
         ({"base": {"axes": "ne", "mission": {**MISSION_PLAN, "leg_max": 5.0}}}, "mission.leg_max"),
@@ -480,13 +480,14 @@ def test_a_mission_sample_flies_the_plan_with_px4_and_the_mpc_and_judges_it():
     spec = parse_spec(_mission_study())
     rows, traces = fly_sample(spec.raw, 0)
     by = {r["controller"]: r for r in rows}
-    assert set(by) == {"pid", "mpc"} and not by["mpc"]["error"], by["mpc"]["error"]
+    assert set(by) == {"pid", "mpc", "lqr"} and not by["mpc"]["error"], by["mpc"]["error"]
+    assert not by["lqr"]["error"], by["lqr"]["error"]
     for r in rows:
         assert set(ms.SUMMARY_COLUMNS) <= set(r) and "_waypoints" not in r
         assert r["failure"] == ms.mission_failure(r, judged=r["controller"] != "pid")
     # The plan is the sample's: both flew the same waypoints, each finishing it.
     plan = spec.mission(spec.draw(0), 0)
-    for c in ("pid", "mpc"):
+    for c in ("pid", "mpc", "lqr"):
         reached = [i for _, i, k in traces[c].meta["mission_events"] if k == "reached"]
         assert reached == list(range(len(plan)))
     assert by["pid"]["time_vs_px4"] == 1.0

@@ -347,6 +347,33 @@ def test_silent_link_gives_clear_error():
         connect("carrier-pigeon")
 
 
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--auto"], "--auto flies a waypoint plan"),
+        (["--mission", "PLAN"], "--model is required"),
+        (["--mission", "PLAN", "--auto", "--model", "m.json"], "--model and --adapt do not"),
+        (["--model", "m.json", "--target", "payload"], "apply to a waypoint plan"),
+        (["--mission", "steps.toml", "--model", "m.json"], "m.json"),
+        (["--mission", "plan.txt", "--model", "m.json"], "must end in .toml or .plan"),
+    ],
+)
+def test_fly_refuses_a_wrong_plan_request_in_one_line(tmp_path, capsys, extra, message):
+    """Which flight ``fly`` makes is decided before any link is opened: a waypoint plan
+    (TOML with [[waypoint]]s or .plan), velocity steps, or PX4's own mission (--auto)."""
+    from swingrt.cli import main
+
+    plan = tmp_path / "plan.toml"
+    plan.write_text("speed = 3.0\n[[waypoint]]\nn = 0.0\ne = 0.0\nd = -10.0\n")
+    (tmp_path / "steps.toml").write_text("[[step]]\nt = 0\nvn = 1\n")
+    (tmp_path / "plan.txt").write_text("")
+    args = [str(plan) if a == "PLAN" else str(tmp_path / a) if "." in a else a for a in extra]
+    url = f"udp:127.0.0.1:{free_port()}"
+    assert main(["fly", "--connect", url, "--timeout", "0.5", *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0], err
+
+
 def test_offboard_refused_before_stream_and_accepted_after(vehicle):
     url, _ = vehicle
     conn = observer(url)
@@ -628,6 +655,70 @@ def test_fly_against_sitl_damps_swing_like_pure_simulation(tmp_path):
     )  # fmt: skip
     iae_fly = float(np.sum(np.abs(tr["swing_n"])) * ts)
     assert abs(iae_fly - iae_sim) <= 0.2 * iae_sim, (iae_fly, iae_sim)
+
+
+def test_fly_a_waypoint_plan_against_sitl_like_pure_simulation(tmp_path):
+    """``swingrt fly --mission PLAN`` (the position MPC with preview over MAVLink, against
+    ``swingrt sitl`` in real time) flies a waypoint plan as the same MPC on the same legs
+    does in pure simulation: every item reached, each leg's largest swing within 25 % and
+    the plan's time within 1.5 s; the per-waypoint rows are printed."""
+    from swingrt import mission as ms
+    from swingrt.io.flight import Trace
+    from swingrt.sysid import identify
+
+    plan = tmp_path / "plan.toml"
+    plan.write_text(
+        'name = "ell"\nspeed = 4.0\nacceptance_radius = 0.3\nhold = 3.0\n'
+        "[[waypoint]]\nn = 0.0\ne = 0.0\nd = -10.0\nhold = 1.0\n"
+        "[[waypoint]]\nn = 12.0\ne = 0.0\nd = -10.0\n"
+        "[[waypoint]]\nn = 12.0\ne = 8.0\nd = -10.0\n"
+    )
+    payload = {"payload": {"mass": 0.3, "length": 1.5}}
+    (tmp_path / "payload.toml").write_text("[payload]\nmass = 0.3\nlength = 1.5\n")
+    m = ms.load(str(plan))
+    # The model: the white-box pendulum identified from PX4's mission mode flying the plan.
+    trace, _ = ms.fly(m, "px4", payload)
+    model = identify(trace, axes="ne", method="whitebox", payload_mass=0.3, test_span=8.0)
+    model.save(str(tmp_path / "model.json"))
+    sim_trace, sim_events = ms.fly(m, ms.shaped_legs(model), payload, model=model)
+    sim_rows = ms.waypoint_report(m, sim_trace, sim_events)
+    sim_total = max(t for t, _, k in sim_events if k == "completed")
+
+    url = f"udp:127.0.0.1:{free_port()}"
+    physics = tmp_path / "physics.parquet"
+    sitl = subprocess.Popen(
+        [sys.executable, "-m", "swingrt", "sitl", str(tmp_path / "payload.toml"),
+         "--listen", url, "--log", str(physics)],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    try:
+        res = subprocess.run(
+            [sys.executable, "-m", "swingrt", "fly", "--connect", url, "--model",
+             str(tmp_path / "model.json"), "--mission", str(plan), "--log",
+             str(tmp_path / "fly.parquet")],
+            timeout=120, capture_output=True, text=True,
+        )  # fmt: skip
+    finally:
+        out = stop(sitl, signal.SIGINT)
+    assert res.returncode == 0, res.stdout + res.stderr + out
+    assert "Traceback" not in out, out
+    assert "mpc: mission finished at" in res.stdout
+    node = Trace.from_parquet(tmp_path / "fly.parquet")
+    # Judged alike: both paths by PX4's navigator rule from the mission's start (the
+    # node's first tick; the simulator's "started" event), true swing where there is one.
+    t0 = next(t for t, _, k in sim_events if k == "started")
+    keep = sim_trace["t"] >= t0
+    sim_path = {c: v[keep] for c, v in sim_trace.items()}
+    sim_path["t"] = sim_path["t"] - t0
+    sim_judged = ms.waypoint_report(m, sim_path, ms.replay_events(m, sim_path))
+    fly_events = ms.replay_events(m, node)
+    fly_rows = ms.waypoint_report(m, node, fly_events)
+    assert [r["item"] for r in fly_rows] == [0.0, 1.0, 2.0]
+    for a, b in zip(sim_judged[1:], fly_rows[1:], strict=True):
+        assert b["leg_swing_max_deg"] == pytest.approx(a["leg_swing_max_deg"], rel=0.25)
+    fly_total = max(t for t, _, k in fly_events if k == "completed")
+    assert fly_total == pytest.approx(sim_total - t0, abs=1.5)
+    assert [r["item"] for r in sim_rows] == [0.0, 1.0, 2.0]
 
 
 # ----------------------------------------------------------------------------- launcher

@@ -128,16 +128,71 @@ def test_swingrt_mission_flies_the_position_mpc_on_a_model(tmp_path, capsys):
     (tmp_path / "payload.toml").write_text("[payload]\nmass = 0.3\nlength = 1.5\n")
     args = ["mission", str(tmp_path / "square.toml"), "--guidance", "px4"]
     args += ["--scenario", str(tmp_path / "payload.toml"), "--model", str(tmp_path / "model.json")]
+    # The same white-box model's pendulum flies the thesis's LQR in place of PX4's velocity
+    # loop (PX4's position loop on the legs gives it the velocity reference).
+    args += ["--lqr", str(tmp_path / "model.json")]
     assert main([*args, "-o", str(tmp_path / "r.json")]) == 0
     capsys.readouterr()
     report = json.loads((tmp_path / "r.json").read_text())
-    px4, mpc = report["px4"]["waypoints"], report["mpc"]["waypoints"]
-    assert [r["item"] for r in mpc] == [0, 1, 2]
-    for a, b in zip(px4[1:], mpc[1:], strict=True):
+    px4, mpc, lqr = (report[k]["waypoints"] for k in ("px4", "mpc", "lqr"))
+    assert [r["item"] for r in mpc] == [r["item"] for r in lqr] == [0, 1, 2]
+    for a, b, c in zip(px4[1:], mpc[1:], lqr[1:], strict=True):
         assert b["leg_swing_max_deg"] < a["leg_swing_max_deg"]
+        assert c["leg_swing_max_deg"] < a["leg_swing_max_deg"]
+    # A data-driven model carries no pendulum for the LQR: refused in one line.
+    dmdc = identify(trace, axes="ne", delays=10, test_span=8.0)
+    dmdc.save(str(tmp_path / "dmdc.json"))
+    bad = ["mission", str(tmp_path / "square.toml"), "--lqr", str(tmp_path / "dmdc.json")]
+    assert main(bad) == 2
+    assert "needs a white-box model" in capsys.readouterr().err
 
 
 # --- what a mission flight is judged by ------------------------------------------------------
+
+
+def test_a_flown_path_is_judged_by_px4s_navigator_rule():
+    """Replayed events of a straight path at constant speed: an item is reached where the
+    path enters its acceptance radius ((L - r) / v), held for its hold from then, and the
+    next one is only the target after that (a path that passes it early does not count)."""
+    from swingrt import mission as ms
+
+    plan = """speed = 2.0
+acceptance_radius = 0.5
+hold = 3.0
+[[waypoint]]
+n = 0.0
+e = 0.0
+d = -10.0
+[[waypoint]]
+n = 10.0
+e = 0.0
+d = -10.0
+[[waypoint]]
+n = 10.0
+e = 4.0
+d = -10.0
+"""
+    m = _core.Mission.from_text(plan, "toml")
+    dt = 0.01
+    t = np.arange(0.0, 20.0, dt)
+    # Hover 3 s, 10 m North at 2 m/s (3 -> 8 s), hover, 4 m East at 2 m/s (11 -> 13 s).
+    pn = np.clip((t - 3.0) * 2.0, 0.0, 10.0)
+    pe = np.clip((t - 11.0) * 2.0, 0.0, 4.0)
+    zero = np.zeros_like(t)
+    trace = {"t": t, "pn": pn, "pe": pe, "pd": zero - 10.0, "vn": zero, "ve": zero, "vd": zero}
+    events = ms.replay_events(m, trace)
+    got = {(i, k): ti for ti, i, k in events}
+    assert got[(0, "reached")] == pytest.approx(0.0)
+    assert got[(0, "left")] == pytest.approx(3.0, abs=dt)
+    assert got[(1, "reached")] == pytest.approx(3.0 + 9.5 / 2.0, abs=dt)
+    assert got[(1, "left")] == pytest.approx(3.0 + 9.5 / 2.0 + 3.0, abs=dt)
+    assert got[(2, "reached")] == pytest.approx(11.0 + 3.5 / 2.0, abs=dt)
+    assert got[(2, "completed")] == pytest.approx(11.0 + 3.5 / 2.0 + 3.0, abs=dt)
+    # Through item 2's radius before item 1's hold is over: not reached until it is again.
+    early = dict(trace, pe=np.where((t > 8.0) & (t < 9.0), 4.0, pe), pn=pn)
+    early["pn"] = np.where((t > 8.0) & (t < 9.0), 10.0, pn)
+    late = {(i, k): ti for ti, i, k in ms.replay_events(m, early)}
+    assert late[(2, "reached")] == pytest.approx(got[(2, "reached")], abs=dt)
 
 
 def _passing() -> dict:
@@ -269,3 +324,31 @@ def test_swingrt_mission_refuses_a_one_axis_model_and_an_unknown_figure_format(t
     assert main(args) == 2
     err = capsys.readouterr().err
     assert "a mission flies both axes" in err and "acc_sp_n" in err and err.count("\n") == 1
+
+
+def test_the_payload_target_takes_the_cable_length_from_what_is_known(tmp_path, capsys):
+    """--target payload: a given length is used as is; a white-box model's identified length
+    next; else the pendulum length of the model's swing period, which lies between the
+    length over 1 + m_p/m_Q (vehicle free) and the length (vehicle held)."""
+    from swingrt import mission as ms
+    from swingrt.cli import main
+    from swingrt.sysid import identify
+
+    m = _core.Mission.from_text(SQUARE, "toml")
+    trace, _ = ms.fly(m, "px4", {"payload": {"mass": 0.3, "length": 1.5}})
+    white = identify(trace, axes="ne", method="whitebox", payload_mass=0.3, test_span=8.0)
+    dmdc = identify(trace, axes="ne", delays=10, test_span=8.0)
+    assert ms.target_tracking(dmdc) == (None, "the vehicle over the waypoints")
+    given, _ = ms.target_tracking(dmdc, "payload", 2.0)
+    assert given == {"target": "payload", "cable_length": 2.0}
+    wb, why = ms.target_tracking(white, "payload")
+    assert wb["cable_length"] == pytest.approx(white.diagnostics["whitebox"]["length"])
+    assert "white-box" in why
+    est, why = ms.target_tracking(dmdc, "payload")
+    assert 0.95 * 1.5 / (1 + 0.3 / 0.952) <= est["cable_length"] <= 1.5
+    assert "lower bound" in why
+    with pytest.raises(ConfigError, match="payload target only"):
+        ms.target_tracking(dmdc, "vehicle", 1.0)
+    (tmp_path / "square.toml").write_text(SQUARE)
+    assert main(["mission", str(tmp_path / "square.toml"), "--target", "payload"]) == 2
+    assert "give --model" in capsys.readouterr().err

@@ -115,6 +115,52 @@ def shaped_legs(model: _core.LinearModel) -> dict[str, Any]:
     return legs
 
 
+#: What a mission's reference is for: the vehicle, or the payload hanging below it.
+TARGETS = ("vehicle", "payload")
+
+
+def target_tracking(
+    model: _core.LinearModel, target: str = "vehicle", cable_length: float | None = None
+) -> tuple[dict[str, Any] | None, str]:
+    """The tracking settings that put ``target`` over the waypoints, and where the cable
+    length came from. For the payload the length is ``cable_length`` if given, else the
+    white-box length the model was identified with, else the pendulum length of the model's
+    swing period, g (T/2π)²: a lower bound, since the vehicle pulled by the payload swings
+    faster than a pendulum from a fixed point (by √(1 + m_p/m_Q))."""
+    if target not in TARGETS:
+        raise ConfigError(f"target {target!r} is not one of {', '.join(TARGETS)}", field="target")
+    if target == "vehicle":
+        if cable_length is not None:
+            raise ConfigError("a cable length applies to the payload target only", field="target")
+        return None, "the vehicle over the waypoints"
+    if cable_length is not None:
+        if not (0.01 <= cable_length <= 100.0):
+            raise ConfigError(
+                f"cable length {cable_length:g} m is not in [0.01, 100]", field="cable_length"
+            )
+        length, source = float(cable_length), "given"
+    else:
+        wb = model.diagnostics.get("whitebox") or {}
+        if wb.get("length"):
+            length, source = float(wb["length"]), "the white-box model's"
+        else:
+            from swingrt.sysid import swing_period
+
+            period = swing_period(model)
+            if period is None:
+                raise ConfigError(
+                    "the payload target needs the cable's length: the model shows no swing "
+                    "period; give it (--cable-length)",
+                    field="cable_length",
+                )
+            length = _core.GRAVITY * (period / (2.0 * math.pi)) ** 2
+            source = f"from the swing period {period:.2f} s (a lower bound)"
+    return (
+        {"target": "payload", "cable_length": length},
+        f"the payload over the waypoints, cable {length:.2f} m ({source})",
+    )
+
+
 def fly(
     mission: _core.Mission,
     guidance: str | dict[str, Any],
@@ -122,15 +168,20 @@ def fly(
     seed: int = 0,
     model: _core.LinearModel | None = None,
     tracking: dict[str, Any] | None = None,
+    lqr: dict[str, float] | None = None,
 ) -> tuple[dict[str, np.ndarray], list[tuple[float, int, str]]]:
     """Fly ``mission`` in the simulator under PX4's cascade with ``guidance`` (``px4``: PX4's
     mission behaviour; ``smooth``: swingrt's jerk-limited legs; or the guidance settings, as
     :func:`shaped_legs` gives), tracked by the position MPC with preview on ``model`` when
-    one is given (``tracking``: its settings, ``TrackingSettings``); returns the trace and
-    the mission's events.
+    one is given (``tracking``: its settings, ``TrackingSettings``), or by the baseline LQR
+    with the pendulum ``lqr`` (:func:`swingrt.sysid.lqr_parameters`) in place of PX4's
+    velocity loop, PX4's position loop giving it the velocity reference from the guidance's
+    trajectory (as it does to PX4's own PID); returns the trace and the mission's events.
     The flight ends at the last hold's end (or fails after a time limit)."""
     if model is not None:
         check_model(model)
+    if model is not None and lqr is not None:
+        raise ConfigError("a mission flight has one controller: a model or the LQR", field="lqr")
     items = mission.items
     legs = sum(
         math.dist(a["position"], b["position"]) / max(b["speed"] or 1.0, 0.1)
@@ -145,11 +196,33 @@ def fly(
         # The budget is wall-clock per tick; the simulator is not real-time, so a loaded
         # machine must not hand the axes back to PX4.
         sim.attach_tracking_mpc(model, tracking, 1.0, 1.0)
+    if lqr is not None:
+        sim.attach_lqr(lqr, 2, _core.check_settings("lqr", None), 1.0, 1.0)
     while not sim.mission_done and sim.t < limit - 0.5:
         sim.advance(0.5)
     if not sim.mission_done:
         raise ConfigError(f"mission {mission.name!r}: not finished after {limit:.0f} s")
     return {k: np.asarray(v) for k, v in sim.trace().items()}, sim.mission_events()
+
+
+def replay_events(mission: _core.Mission, trace: Mapping[str, Any]) -> list[tuple[float, int, str]]:
+    """The events of a flown path by PX4's navigator rule (an item is reached inside its
+    acceptance radius, held for its hold time from then, and only then is the next one the
+    target), whoever flew it: the one judge of flights whose own bookkeeping is not at hand
+    (PX4's AUTO.MISSION) or differs (swingrt's guidance), applied to the trace's ``t``,
+    position and velocity from its first row."""
+    g = _core.Guidance(mission, {"mode": "px4"})
+    t = np.asarray(trace["t"], dtype=float)
+    pos = np.stack([np.asarray(trace[c], dtype=float) for c in ("pn", "pe", "pd")], axis=1)
+    vel = np.stack([np.asarray(trace[c], dtype=float) for c in ("vn", "ve", "vd")], axis=1)
+    if t.size == 0:
+        return []
+    g.start(float(t[0]), pos[0], vel[0])
+    for i in range(t.size):
+        g.update(float(t[i]), float(t[i] - t[i - 1]) if i else 0.0, pos[i], vel[i])
+        if g.done:
+            break
+    return list(g.events())
 
 
 def waypoint_report(
@@ -166,7 +239,9 @@ def waypoint_report(
     sn, se = true_swing(trace)
     swing = np.degrees(np.hypot(sn, se))
     pos = np.stack([trace["pn"], trace["pe"]], axis=1)
-    pay = np.stack([trace["payload_pn"], trace["payload_pe"]], axis=1)
+    # A flight log of a real vehicle has no payload position: its error is then unknown.
+    nan = np.full(t.shape, np.nan)
+    pay = np.stack([trace.get("payload_pn", nan), trace.get("payload_pe", nan)], axis=1)
     reached = {i: ti for ti, i, k in events if k == "reached"}
     left = {i: ti for ti, i, k in events if k in ("left", "completed")}
     items = mission.items

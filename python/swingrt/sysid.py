@@ -616,6 +616,23 @@ def to_statespace(model: LinearModel) -> Any:
 SWING_PERIODS = (0.4, 10.0)
 
 
+def lqr_parameters(model: LinearModel) -> dict[str, float]:
+    """The baseline LQR's pendulum (``m_q``, ``m_p``, ``l``, ``c``) from a white-box model's
+    estimate; ModelError naming the model's method when it has none."""
+    est = model.diagnostics.get("whitebox")
+    if not est:
+        raise ModelError(
+            "the LQR needs a white-box model (`identify --method whitebox`): this one carries "
+            "no pendulum estimate"
+        )
+    return {
+        "m_q": float(est["vehicle_mass"]),
+        "m_p": float(est["payload_mass"]),
+        "l": float(est["length"]),
+        "c": float(est.get("friction", 0.0)),
+    }
+
+
 def swing_period(model: LinearModel, span: float = 30.0) -> float | None:
     """The period [s] of the swing the model answers an acceleration pulse with on its
     first axis: the largest peak, within :data:`SWING_PERIODS`, of the spectrum of the swing

@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from swingrt.errors import IdentificationError
 from swingrt.methods import METHODS
 from swingrt.metrics import METRICS, step_metrics
 
@@ -212,7 +213,9 @@ def fly_sample(
             continue
         if plan is not None:
             tracking = {"mpc": exp.mpc} if exp.mpc else None
-            row.update(_fly_mission(plan, ctrl, ev_sc, seed + 1, model, tracking, traces, out))
+            row.update(
+                _fly_mission(plan, ctrl, ev_sc, seed + 1, (model, lqr), tracking, traces, out)
+            )
             rows.append(row)
             continue
         try:
@@ -256,20 +259,28 @@ def _fly_mission(
     ctrl: str,
     scenario: Any,
     seed: int,
-    model: Any,
+    identified: tuple[Any, dict[str, float] | None],
     tracking: dict[str, Any] | None,
     traces: dict[str, Any],
     out: Path | None,
 ) -> dict[str, Any]:
-    """Fly a mission sample's plan with ``ctrl`` (PX4's mission mode for ``pid``, the
-    position MPC with ``tracking`` settings on shaped legs for ``mpc``); its summary columns,
-    with the per-waypoint rows under ``_waypoints`` for :func:`_judge_missions`."""
+    """Fly a mission sample's plan with ``ctrl`` (PX4's mission mode for ``pid``; on legs
+    shaped against the identified model's swing, the position MPC with ``tracking`` settings
+    for ``mpc`` and the LQR on the white-box pendulum for ``lqr``); ``identified`` is the
+    (model, LQR pendulum or None); its summary columns, with the per-waypoint rows under
+    ``_waypoints`` for :func:`_judge_missions`."""
     from swingrt import mission as ms
     from swingrt.io.flight import Trace
 
+    model, lqr = identified
     try:
         if ctrl == "pid":
             trace, events = ms.fly(plan, "px4", scenario, seed=seed)
+        elif ctrl == "lqr":
+            if lqr is None:
+                why = model.diagnostics.get("whitebox_skipped", "no white-box estimate")
+                raise IdentificationError(f"lqr: {why}")
+            trace, events = ms.fly(plan, ms.shaped_legs(model), scenario, seed=seed, lqr=lqr)
         else:
             legs = ms.shaped_legs(model)
             trace, events = ms.fly(plan, legs, scenario, seed=seed, model=model, tracking=tracking)

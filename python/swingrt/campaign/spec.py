@@ -16,7 +16,8 @@ Top-level keys:
 - ``[base.mission]``: the evaluation flight is a mission instead of the step: a random
   delivery plan per sample (the fields of ``_core.Mission.random``: ``waypoints``,
   ``leg_min``, ``leg_max``, ``speed``, ``hold``, ``acceptance_radius``, ``altitude``,
-  ``turn_max``; its seed is the sample's), flown by PX4's mission mode (``pid``) and by the
+  ``turn_max``; its seed is the sample's), flown by PX4's mission mode (``pid``), the LQR
+  (``lqr``, under PX4's position loop) and by the
   position MPC along legs shaped against the model's swing (``mpc``); ``axes`` must be
   ``ne``, and the rows carry :data:`swingrt.mission.SUMMARY_COLUMNS`;
 - ``[vary]``: dotted field → distribution (:mod:`swingrt.campaign.sampling`).
@@ -79,8 +80,9 @@ _SECTIONS = (
     "mission",
     *METHOD_SECTIONS,
 )
-#: The controllers a mission campaign flies: PX4's mission mode and the position MPC.
-MISSION_CONTROLLERS = ("pid", "mpc")
+#: The controllers a mission campaign flies: PX4's mission mode, the position MPC and the
+#: thesis's LQR under PX4's position loop.
+MISSION_CONTROLLERS = ("pid", "mpc", "lqr")
 _SCALARS = ("duration", "training_duration")
 #: How many draws :func:`load_spec` validates in the core besides the bounds.
 CHECK_DRAWS = 4

@@ -20,7 +20,10 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "fly",
         help="fly the MPC offboard over MAVLink",
         description="Connect to a PX4 vehicle, switch to OFFBOARD, fly a velocity-step "
-        "mission with the swing-damping MPC at 1/Ts, hand back to hold at the end.",
+        "mission with the swing-damping MPC at 1/Ts, hand back to hold at the end. With a "
+        "waypoint plan (--mission PLAN.plan or a TOML of [[waypoint]]s) the position MPC with "
+        "preview flies it along legs shaped against the model's swing; with --auto PX4's own "
+        "AUTO.MISSION flies it (uploaded by the MAVLink mission protocol), the baseline.",
     )
     p.add_argument(
         "--connect",
@@ -29,13 +32,32 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         help="udp:HOST:PORT (send to a sitl), udpin:0.0.0.0:14540 (PX4 SITL), "
         "serial:/dev/ttyTHS1:921600",
     )
-    p.add_argument("--model", required=True, help="model JSON from `swingrt identify`")
-    p.add_argument("--mission", help="mission TOML ([[step]] t, vn, ve; duration)")
+    p.add_argument("--model", help="model JSON from `swingrt identify` (not with --auto)")
+    p.add_argument(
+        "--mission",
+        help="velocity steps (TOML of [[step]] t, vn, ve; duration) or a waypoint plan "
+        "(QGroundControl .plan, or TOML of [[waypoint]] n, e, d in PX4's local frame)",
+    )
+    p.add_argument(
+        "--auto",
+        action="store_true",
+        help="with a waypoint plan: upload it and let PX4's AUTO.MISSION fly it (the baseline), "
+        "logging the flight; no model",
+    )
     p.add_argument(
         "--adapt",
         action="store_true",
         help="fly the adaptive MPC: the model follows the payload in flight (online DMDc, "
         "change detector, checked re-synthesis on a worker thread)",
+    )
+    p.add_argument(
+        "--target",
+        choices=("vehicle", "payload"),
+        default="vehicle",
+        help="with a waypoint plan: what the MPC puts over each waypoint (as `swingrt mission`)",
+    )
+    p.add_argument(
+        "--cable-length", type=float, metavar="M", help="cable length for --target payload"
     )
     p.add_argument("--log", metavar="FILE", help="write the flight trace + loop timing")
     p.add_argument("--system-id", type=int, help="expected vehicle system id")
@@ -94,7 +116,20 @@ def run(args) -> int:
         raise ConfigError(f"--swing-limit must be in (0, 90) degrees, not {args.swing_limit}")
     if args.system_id is not None and not (1 <= args.system_id <= 255):
         raise ConfigError(f"--system-id must be 1..255, not {args.system_id}")
+    plan = _waypoint_plan(args.mission)
+    if args.auto and plan is None:
+        raise ConfigError("--auto flies a waypoint plan: give --mission PLAN (.plan or TOML)")
+    if args.auto and (args.model or args.adapt):
+        raise ConfigError("--auto: PX4 flies its own mission; --model and --adapt do not apply")
+    if not args.auto and not args.model:
+        raise ConfigError("--model is required (a model JSON from `swingrt identify`)")
+    if plan is None and (args.target != "vehicle" or args.cable_length is not None):
+        raise ConfigError("--target and --cable-length apply to a waypoint plan (--mission PLAN)")
+    if plan is not None and args.adapt:
+        raise ConfigError("--adapt flies velocity steps; a waypoint plan flies the position MPC")
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
+    if plan is not None:
+        return _fly_plan(args, plan)
     mission = Mission.from_toml(args.mission) if args.mission else Mission.default()
     controller, ts, axes = load_controller(args.model, adapt=args.adapt)
     watchdog = Watchdog(
@@ -126,4 +161,84 @@ def run(args) -> int:
     if args.adapt:
         adopted = sum(1 for _, what, _ in controller.events() if what == "adopted")
         print(f"fly: adaptive MPC adopted {adopted} re-identified model(s)")
+    return 0
+
+
+def _waypoint_plan(path):
+    """The waypoint plan at ``path`` (``swingrt.mission.load``), or None for velocity steps
+    (no path, or a TOML without ``[[waypoint]]``)."""
+    import tomllib
+    from pathlib import Path
+
+    from swingrt import mission as ms
+
+    if path is None:
+        return None
+    p = Path(path)
+    if p.suffix.lower() == ".toml":
+        try:
+            doc = tomllib.loads(p.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise ConfigError(f"{p}: no such mission file") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise ConfigError(f"{p}: invalid TOML: {exc}") from None
+        if "waypoint" not in doc:
+            return None
+    elif p.suffix.lower() != ".plan":
+        raise ConfigError(f"--mission {p}: must end in .toml or .plan")
+    try:
+        return ms.load(str(p))
+    except FileNotFoundError:
+        raise ConfigError(f"{p}: no such mission file") from None
+
+
+def _fly_plan(args, plan) -> int:
+    """Fly a waypoint plan over MAVLink (the MPC, or with --auto PX4's AUTO.MISSION) and
+    print one row per waypoint from the node's log (the measured swing; a simulator behind
+    PX4 also sends the true one, which the rows then use)."""
+    from swingrt import _core
+    from swingrt import mission as ms
+    from swingrt.mavlink.link import connect
+    from swingrt.mavlink.mission import fly_mission, fly_px4_mission
+    from swingrt.mavlink.offboard import Watchdog
+
+    model = None
+    tracking = None
+    if not args.auto:
+        model = _core.LinearModel.load(args.model)
+        ms.check_model(model)
+        tracking, what = ms.target_tracking(model, args.target, args.cable_length)
+        print(f"fly: {what}")
+    elif args.target != "vehicle" or args.cable_length is not None:
+        raise ConfigError("--auto: PX4 flies its own mission; --target does not apply")
+    ts = 0.02 if model is None else model.dt
+    watchdog = Watchdog(
+        ts,
+        stale_factor=args.stale_factor,
+        budget=args.budget * 1e-3 if args.budget is not None else None,
+        swing_limit=math.radians(args.swing_limit),
+    )
+    options = {
+        "log_path": args.log,
+        "system_id": args.system_id,
+        "hold": args.hold,
+        "heartbeat_timeout": args.timeout,
+        "telemetry_timeout": args.timeout,
+        "watchdog": watchdog,
+    }
+    conn = connect(args.connect)
+    try:
+        if model is None:
+            flight = fly_px4_mission(conn, plan, ts=ts, **options)
+        else:
+            flight = fly_mission(
+                conn, model, plan, tracking=tracking, acc_limit=args.acc_limit, **options
+            )
+    finally:
+        conn.close()
+    cols = flight.report.columns
+    rows = ms.waypoint_report(flight.mission, cols, flight.events)
+    total = max((t for t, _, k in flight.events if k == "completed"), default=math.nan)
+    print(ms.format_report("px4" if model is None else "mpc", rows, total))
+    print(f"fly: {flight.report.summary()}")
     return 0

@@ -31,7 +31,7 @@ def identify_case(
     and the LQR parameters are ``None`` and the model's ``diagnostics['whitebox_skipped']``
     says why."""
     from swingrt.reports import plot_pareto
-    from swingrt.sysid import identify, search, select_for_control
+    from swingrt.sysid import identify, lqr_parameters, search, select_for_control
 
     described = _vehicle_mass(vehicle)
     mass = {} if described is None else {"vehicle_mass": described}
@@ -60,14 +60,7 @@ def identify_case(
         told = "the default vehicle mass" if assumed is None else f"vehicle mass {assumed:g} kg"
         why = f"white-box not estimated with {told}: {exc}"
         return model.with_diagnostics({"whitebox_skipped": why}), None, None
-    est = wb.diagnostics["whitebox"]
-    lqr = {
-        "m_q": float(est["vehicle_mass"]),
-        "m_p": float(est["payload_mass"]),
-        "l": float(est["length"]),
-        "c": float(est.get("friction", 0.0)),
-    }
-    return model, wb, lqr
+    return model, wb, lqr_parameters(wb)
 
 
 def without_whitebox(exp: Experiment, model: Any, lqr: dict[str, float] | None) -> dict[str, str]:

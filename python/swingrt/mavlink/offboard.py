@@ -215,6 +215,11 @@ class Telemetry:
         self._imu_next: float | None = None
         self._imu_period = 1e6 / float(estimator.settings["rate"]) if estimator else math.inf
         self.acc_sp = [nan] * 3
+        #: PX4's clock [s] of the newest LOCAL_POSITION_NED (under ``swingrt hil``: the
+        #: physics trace's time), to line the node's log up with the vehicle's.
+        self.px4_time = nan
+        #: Mission items PX4 reported reached (MISSION_ITEM_REACHED) as (receive time, seq).
+        self.reached: list[tuple[float, int]] = []
         self.t_pos = self.t_att = self.t_swing = self.t_heartbeat = self.t_target = -math.inf
         self.mode: tuple[int, int] | None = None
         self.seen_offboard = False
@@ -251,6 +256,7 @@ class Telemetry:
         if kind == "LOCAL_POSITION_NED":
             self.pos = [msg.x, msg.y, msg.z]
             self.vel = [msg.vx, msg.vy, msg.vz]
+            self.px4_time = msg.time_boot_ms * 1e-3
             self.t_pos = now
         elif kind == "ATTITUDE_QUATERNION":
             self.q = [msg.q1, msg.q2, msg.q3, msg.q4]
@@ -280,6 +286,8 @@ class Telemetry:
                     self.seen_offboard = True
         elif kind == "COMMAND_ACK":
             self.acks.append((msg.command, msg.result))
+        elif kind == "MISSION_ITEM_REACHED":
+            self.reached.append((now, int(msg.seq)))
         elif kind == "STATUSTEXT":
             text = msg.text if isinstance(msg.text, str) else msg.text.decode("ascii", "replace")
             log.info("vehicle: %s", text.rstrip("\0"))
@@ -458,7 +466,14 @@ class FlightReport:
 # ----------------------------------------------------------------------------- session
 
 #: Columns the node logs: the trace columns (:data:`swingrt.io.TRACE_COLUMNS`) + loop timing.
-NODE_COLUMNS = (*TRACE_COLUMNS, "swing_true_n", "swing_true_e", "jitter_s", "compute_s")
+NODE_COLUMNS = (
+    *TRACE_COLUMNS,
+    "swing_true_n",
+    "swing_true_e",
+    "px4_time_s",
+    "jitter_s",
+    "compute_s",
+)
 
 
 #: Most messages read per drain (one tick); the rest wait in the socket (or are dropped by it).
@@ -563,8 +578,9 @@ class OffboardSession:
 
     # -------------------------------------------------------------- phases
 
-    def connect(self) -> None:
-        """Heartbeat, telemetry rates, first telemetry; raises LinkError with one line."""
+    def connect(self, *, swing: bool = True) -> None:
+        """Heartbeat, telemetry rates, first telemetry (the position, and with ``swing`` the
+        swing); raises LinkError with one line."""
         hb = wait_heartbeat(self.conn, timeout=self.heartbeat_timeout, system_id=self.system_id)
         self.tel.vehicle_sysid = hb.get_srcSystem()
         self.tel.update(hb, time.monotonic())
@@ -587,7 +603,7 @@ class OffboardSession:
         deadline = time.monotonic() + wait
         while time.monotonic() < deadline:
             self._drain()
-            if math.isfinite(self.tel.t_pos) and math.isfinite(self.tel.t_swing):
+            if math.isfinite(self.tel.t_pos) and (not swing or math.isfinite(self.tel.t_swing)):
                 break
             time.sleep(0.005)
         else:
@@ -596,7 +612,7 @@ class OffboardSession:
             if not math.isfinite(self.tel.t_pos):
                 missing.append("LOCAL_POSITION_NED")
             hint = ""
-            if not math.isfinite(self.tel.t_swing):
+            if swing and not math.isfinite(self.tel.t_swing):
                 missing.append(self.tel.swing_label)
                 if est is None:
                     hint = (
@@ -608,8 +624,16 @@ class OffboardSession:
         self.alt_hold = self.tel.pos[2]
         self.yaw_hold = self.tel.euler()[2]
 
-    def run(self, policy: Callable, duration: float, *, reset: Callable | None = None):
-        """Pre-stream, engage OFFBOARD, run ``policy`` for ``duration`` s, hand back."""
+    def run(
+        self,
+        policy: Callable,
+        duration: float,
+        *,
+        reset: Callable | None = None,
+        until: Callable[[], bool] | None = None,
+    ):
+        """Pre-stream, engage OFFBOARD, run ``policy`` for ``duration`` s (or until
+        ``until()`` holds after a tick), hand back."""
         n_max = int(math.ceil(duration / self.ts)) + 1
         cols = {c: np.full(n_max, np.nan) for c in NODE_COLUMNS}
         aborted = None
@@ -663,8 +687,49 @@ class OffboardSession:
                 if reason is not None:
                     aborted = f"{reason} at t = {(k - 1) * self.ts:.2f} s"
                     break
+                if until is not None and until():
+                    break
         finally:
             self._hand_back(emergency=aborted is not None)
+        return self._report(cols, k, n_max, missed, aborted)
+
+    def watch(self, duration: float, until: Callable[[], bool]) -> FlightReport:
+        """Log the telemetry at 1/Ts while the vehicle flies itself (PX4's own mode, no
+        setpoint sent) for up to ``duration`` s, until ``until()`` holds; a stale position
+        or a dead link ends the watch early (``aborted`` names it)."""
+        n_max = int(math.ceil(duration / self.ts)) + 1
+        cols = {c: np.full(n_max, np.nan) for c in NODE_COLUMNS}
+        nan2 = (math.nan, math.nan)
+        aborted = None
+        missed = k = 0
+        t0 = time.perf_counter()
+        prev = list(self.tel.swing)
+        while k < n_max:
+            deadline = t0 + k * self.ts
+            now = time.perf_counter()
+            if deadline > now:
+                time.sleep(deadline - now)
+                now = time.perf_counter()
+            self._drain()
+            mono = time.monotonic()
+            if mono - self.tel.t_pos > self.watchdog.stale_factor * self.ts:
+                aborted = f"stale telemetry: LOCAL_POSITION_NED at t = {k * self.ts:.2f} s"
+                break
+            if mono - self.tel.t_heartbeat > self.watchdog.link_timeout:
+                aborted = f"dead link: no heartbeat at t = {k * self.ts:.2f} s"
+                break
+            sw = self.tel.swing
+            rate = ((sw[0] - prev[0]) / self.ts, (sw[1] - prev[1]) / self.ts) if k else (0, 0)
+            prev = list(sw)
+            acc = (self.tel.acc_sp[0], self.tel.acc_sp[1], 0.0)
+            self._log(cols, k, now - deadline, math.nan, rate, acc, nan2)
+            k += 1
+            if until():
+                break
+        return self._report(cols, k, n_max, missed, aborted)
+
+    def _report(self, cols, k, n_max, missed, aborted) -> FlightReport:
+        """The report of a loop that logged ``k`` ticks into ``cols``."""
         n = min(k, n_max)
         # Rows of skipped (missed) deadlines were never logged: leave them out, so the trace
         # has a strictly increasing, finite t (with a gap) instead of NaN rows.
@@ -679,7 +744,7 @@ class OffboardSession:
             ticks=int(ok.sum()),
             missed_deadlines=missed,
             jitter=_stats(out["jitter_s"][ok]),
-            compute=_stats(out["compute_s"][ok]),
+            compute=_stats(out["compute_s"][ok & np.isfinite(out["compute_s"])]),
             columns=out,
             aborted=aborted,
         )
@@ -771,6 +836,7 @@ class OffboardSession:
             "swing_n": tel.swing[0], "swing_e": tel.swing[1],
             "swing_rate_n": rate[0], "swing_rate_e": rate[1],
             "swing_true_n": tel.swing_true[0], "swing_true_e": tel.swing_true[1],
+            "px4_time_s": tel.px4_time,
             "acc_sp_n": acc[0], "acc_sp_e": acc[1], "acc_sp_d": tel.acc_sp[2],
             "vel_sp_n": ref[0], "vel_sp_e": ref[1], "vel_sp_d": 0.0,
             "jitter_s": jitter, "compute_s": compute,
