@@ -93,6 +93,40 @@ def test_vehicle_read_from_px4s_own_log_is_the_one_flown(report):
     assert v["thrust_poly"] == pytest.approx(w["thrust_poly"], rel=2e-3)
 
 
+def test_the_vehicle_read_from_px4s_log_hovers_and_swings_as_px4_flew_it(report):
+    """The twin ``swingrt vehicle`` reads from PX4's ULog (its motors scaled to the known
+    take-off mass, the vehicle's own mass given), carrying the same payload under swingrt's
+    own PX4 cascade on the same 2 m/s step: it hovers at the thrust PX4's hover-thrust
+    estimator converged to in the flight, and swings with the period the payload had under
+    the real firmware, within 3 %."""
+    from swingrt.hil.params import vehicle_from_px4
+    from swingrt.io.px4_params import read_px4_parameters
+    from swingrt.sim import simulate
+
+    out, _ = report
+    ulog = out / "px4_flights.ulg"
+    twin, _ = vehicle_from_px4(read_px4_parameters(ulog), mass=M_VEHICLE + M_PAYLOAD)
+    twin = twin.with_overrides(
+        {
+            "vehicle": {"mass": M_VEHICLE},
+            "payload": {"kind": "single", "mass": M_PAYLOAD, "length": CABLE},
+            "setpoints": [{"t": 0.0, "vn": 0.0}, {"t": 2.0, "vn": 2.0}],
+            "duration": 20.0,
+        }
+    )
+    hover = _ulog(ulog, ["hover_thrust_estimate"])["hover_thrust_estimate"]
+    valid = hover["valid"].astype(bool)
+    assert valid.any(), "PX4's hover-thrust estimator never converged"
+    assert twin.hover_thrust() == pytest.approx(
+        float(np.median(hover["hover_thrust"][valid])), rel=0.03
+    )
+    sim = simulate(twin)
+    pid = Trace.from_parquet(out / "default-step__pid.parquet")
+    on_px4 = _swing_period(pid.t, pid["swing_n"], 8.0, 20.0)
+    in_twin = _swing_period(sim.t, sim["swing_n"], 8.0, 20.0)
+    assert in_twin == pytest.approx(on_px4, rel=0.03), (in_twin, on_px4)
+
+
 def test_pid_swings_as_physics_says(report):
     out, rows = report
     pid = Trace.from_parquet(out / "default-step__pid.parquet")

@@ -29,10 +29,11 @@ def builtin(kind: str) -> Scenario:
 
 
 def read_text(path: str | os.PathLike) -> str:
-    """Read a TOML file's text; a missing or undecodable file is a ``ConfigError``."""
+    """Read a TOML file's text (a scenario, a mission); a missing or undecodable file is a
+    ``ConfigError``."""
     p = Path(path)
     if not p.is_file():
-        raise ConfigError(f"scenario file not found: {p}")
+        raise ConfigError(f"file not found: {p}")
     try:
         return p.read_text(encoding="utf-8")
     except UnicodeDecodeError:

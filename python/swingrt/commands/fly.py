@@ -167,22 +167,16 @@ def run(args) -> int:
 def _waypoint_plan(path):
     """The waypoint plan at ``path`` (``swingrt.mission.load``), or None for velocity steps
     (no path, or a TOML without ``[[waypoint]]``)."""
-    import tomllib
     from pathlib import Path
 
     from swingrt import mission as ms
+    from swingrt.scenario import read_toml
 
     if path is None:
         return None
     p = Path(path)
     if p.suffix.lower() == ".toml":
-        try:
-            doc = tomllib.loads(p.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise ConfigError(f"{p}: no such mission file") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise ConfigError(f"{p}: invalid TOML: {exc}") from None
-        if "waypoint" not in doc:
+        if "waypoint" not in read_toml(p):
             return None
     elif p.suffix.lower() != ".plan":
         raise ConfigError(f"--mission {p}: must end in .toml or .plan")

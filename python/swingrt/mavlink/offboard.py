@@ -646,18 +646,10 @@ class OffboardSession:
             if reset is not None:
                 reset(self.tel)
             while k < n_max:
-                deadline = t0 + k * self.ts
-                now = time.perf_counter()
-                if deadline > now:
-                    time.sleep(deadline - now)
-                    now = time.perf_counter()
-                elif now - deadline >= self.ts:  # skip whole missed periods, keep the grid
-                    skip = int((now - deadline) / self.ts)
-                    missed += skip
-                    k += skip
-                    if k >= n_max:
-                        break
-                    deadline = t0 + k * self.ts
+                k, deadline, now, skipped = self._await_tick(t0, k)
+                missed += skipped
+                if k >= n_max:
+                    break
                 jitter = now - deadline
                 self._drain()
                 mono = time.monotonic()
@@ -705,11 +697,10 @@ class OffboardSession:
         t0 = time.perf_counter()
         prev = list(self.tel.swing)
         while k < n_max:
-            deadline = t0 + k * self.ts
-            now = time.perf_counter()
-            if deadline > now:
-                time.sleep(deadline - now)
-                now = time.perf_counter()
+            k, deadline, now, skipped = self._await_tick(t0, k)
+            missed += skipped
+            if k >= n_max:
+                break
             self._drain()
             mono = time.monotonic()
             if mono - self.tel.t_pos > self.watchdog.stale_factor * self.ts:
@@ -727,6 +718,20 @@ class OffboardSession:
             if until():
                 break
         return self._report(cols, k, n_max, missed, aborted)
+
+    def _await_tick(self, t0: float, k: int) -> tuple[int, float, float, int]:
+        """Sleep until tick ``k``'s deadline t0 + k Ts; from a tick already a whole period
+        late, skip to the newest due one (keeping the grid: no drift). Returns the tick, its
+        deadline, the time now and how many ticks were skipped."""
+        deadline = t0 + k * self.ts
+        now = time.perf_counter()
+        if deadline > now:
+            time.sleep(deadline - now)
+            return k, deadline, time.perf_counter(), 0
+        if now - deadline < self.ts:
+            return k, deadline, now, 0
+        skip = int((now - deadline) / self.ts)
+        return k + skip, t0 + (k + skip) * self.ts, now, skip
 
     def _report(self, cols, k, n_max, missed, aborted) -> FlightReport:
         """The report of a loop that logged ``k`` ticks into ``cols``."""
