@@ -41,6 +41,25 @@ def test_table_round_trip(tmp_path, suffix):
         np.testing.assert_allclose(got[c], cols[c], rtol=0, atol=1e-12, err_msg=c)
 
 
+def test_a_parquet_flight_keeps_what_made_it(tmp_path):
+    """A flight written with its metadata (the scenario, a swing estimator's settings) reads
+    back with it through ``load_flight``, as identification needs (an IMU model must carry
+    the estimator it was identified on); metadata that is not a JSON object is one line."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    meta = {"scenario": {"sensors": {"swing": "imu", "estimator": {"rate": 100.0}}}}
+    path = tmp_path / "flight.parquet"
+    write_columns(synthetic_trace(), path, meta=meta)
+    assert load_flight(path).meta == meta
+    table = pa.table({"t": [0.0, 0.1], "vn": [0.0, 0.0]})
+    for raw, why in ((b"{not json", "is not JSON"), (b"[1, 2]", "not a JSON object")):
+        bad = tmp_path / "bad.parquet"
+        pq.write_table(table.replace_schema_metadata({b"swingrt": raw}), bad)
+        with pytest.raises(DataError, match=why):
+            load_flight(bad)
+
+
 def test_euler_quaternion_inverse():
     rng = np.random.default_rng(3)
     r, p, y = rng.uniform(-3, 3, 50), rng.uniform(-1.5, 1.5, 50), rng.uniform(-3.1, 3.1, 50)

@@ -140,10 +140,8 @@ class Trace(MutableMapping[str, np.ndarray]):
         import pyarrow.parquet as pq
 
         table = pq.read_table(path)
-        meta_raw = (table.schema.metadata or {}).get(b"swingrt")
-        meta = json.loads(meta_raw) if meta_raw else {}
         cols = {n: table.column(n).to_numpy().astype(float) for n in table.column_names}
-        return cls(cols, meta, source=str(path))
+        return cls(cols, _parquet_meta(table, Path(path)), source=str(path))
 
 
 def load_flight(
@@ -257,6 +255,21 @@ def write_columns(
 # --------------------------------------------------------------------------- tables
 
 
+def _parquet_meta(table: Any, p: Path) -> dict[str, Any]:
+    """The metadata :meth:`Trace.to_parquet` wrote into a Parquet file's schema ({} when
+    there is none); DataError when it is not a JSON object."""
+    raw = (table.schema.metadata or {}).get(b"swingrt")
+    if not raw:
+        return {}
+    try:
+        meta = json.loads(raw)
+    except (ValueError, UnicodeDecodeError):
+        raise DataError(f"{p}: its swingrt metadata is not JSON", path=p) from None
+    if not isinstance(meta, dict):
+        raise DataError(f"{p}: its swingrt metadata is not a JSON object", path=p)
+    return meta
+
+
 def _load_table(p: Path, suffix: str) -> Trace:
     import pyarrow as pa
 
@@ -280,7 +293,10 @@ def _load_table(p: Path, suffix: str) -> Trace:
         names = table.column_names
     except UnicodeDecodeError:
         raise DataError(f"{p}: the header is not UTF-8 text", path=p) from None
-    out = Trace(source=str(p))
+    # A Parquet flight written here keeps what made it (the scenario, the swing estimator):
+    # identification reads it, e.g. the estimator settings a model on the IMU must fly with.
+    meta = _parquet_meta(table, p) if suffix == ".parquet" else {}
+    out = Trace(meta=meta, source=str(p))
     for name in names:
         col = table.column(name)
         if pa.types.is_integer(col.type) or pa.types.is_floating(col.type):

@@ -10,7 +10,12 @@ commander and mavlink modules:
 - Telemetry: ATTITUDE_QUATERNION, LOCAL_POSITION_NED, POSITION_TARGET_LOCAL_NED (the
   acceleration setpoint of PX4's velocity controller in ``afx afy afz``, as PX4 streams
   ``vehicle_local_position_setpoint``), and the swing angles as DEBUG_VECT named ``SWING``:
-  ``x = swing_n``, ``y = swing_e``, ``z = 0``, radians, ``time_usec`` = simulator time.
+  ``x = swing_n``, ``y = swing_e``, ``z = 0``, radians, ``time_usec`` = simulator time; with
+  no sensor on the cable (the scenario's swing source ``imu``) no ``SWING`` goes out and the
+  true swing goes as DEBUG_VECT ``SWTRUE`` instead (for the node's log only, as ``swingrt
+  hil`` does); HIGHRES_IMU, the simulator's IMU as PX4 streams ``sensor_combined``: body
+  specific force [m/s²] and angular rate [rad/s], FRD, filtered as PX4 filters them
+  (``fields_updated`` = accelerometer and gyro).
   Default 50 Hz each, HEARTBEAT 1 Hz; MAV_CMD_SET_MESSAGE_INTERVAL changes any of them.
 - Commands (COMMAND_LONG, answered by COMMAND_ACK): MAV_CMD_COMPONENT_ARM_DISARM (arming is
   accepted; disarming in the air is denied: the simulator does not model landing),
@@ -52,6 +57,7 @@ from swingrt.mavlink.link import (
     PX4_MAIN_MODE,
     PX4_SUB_MODE_AUTO,
     SWING_NAME,
+    TRUTH_NAME,
     connect,
     mavlink,
     mode_name,
@@ -89,7 +95,11 @@ DEFAULT_STREAMS = {
     mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 0.02,
     mavlink.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: 0.02,
     mavlink.MAVLINK_MSG_ID_DEBUG_VECT: 0.02,
+    mavlink.MAVLINK_MSG_ID_HIGHRES_IMU: 0.02,
 }
+
+#: HIGHRES_IMU ``fields_updated`` bits of the accelerometer (0-2) and gyro (3-5).
+IMU_FIELDS = 0b11_1111
 
 
 def parse_setpoint(msg) -> dict[str, tuple[str, float]]:
@@ -377,9 +387,19 @@ class Vehicle:
             )
         elif msg_id == mavlink.MAVLINK_MSG_ID_DEBUG_VECT:
             us = int(round(s["t"] * 1e6))
+            name, sn, se = SWING_NAME, s["swing_n"], s["swing_e"]
+            if not (math.isfinite(sn) and math.isfinite(se)):
+                name = TRUTH_NAME
+                sn, se = s.get("swing_true_n", math.nan), s.get("swing_true_e", math.nan)
+            self._each(lambda m: m.debug_vect_send(name.encode(), us, sn, se, 0.0))
+        elif msg_id == mavlink.MAVLINK_MSG_ID_HIGHRES_IMU and "imu_ax" in s:
+            # (a simulator without an IMU, such as the tests' stand-ins, sends none)
+            us = int(round(s["t"] * 1e6))
+            acc = (s["imu_ax"], s["imu_ay"], s["imu_az"])
+            gyro = (s["imu_gx"], s["imu_gy"], s["imu_gz"])
             self._each(
-                lambda m: m.debug_vect_send(
-                    SWING_NAME.encode(), us, s["swing_n"], s["swing_e"], 0.0
+                lambda m: m.highres_imu_send(
+                    us, *acc, *gyro, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, IMU_FIELDS, 0
                 )
             )
         elif msg_id == mavlink.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED:
