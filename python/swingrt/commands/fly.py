@@ -234,5 +234,8 @@ def _fly_plan(args, plan) -> int:
     rows = ms.waypoint_report(flight.mission, cols, flight.events)
     total = max((t for t, _, k in flight.events if k == "completed"), default=math.nan)
     print(ms.format_report("px4" if model is None else "mpc", rows, total))
+    if flight.reported is not None:
+        done = ", ".join(f"{k} at {t:.2f} s" for t, k in flight.reported)
+        print(f"fly: PX4 reported the items done (holds over): {done}")
     print(f"fly: {flight.report.summary()}")
     return 0

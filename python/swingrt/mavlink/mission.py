@@ -65,7 +65,7 @@ COUNT_TRIES = 3
 AUTO_MISSION = (PX4_MAIN_MODE["AUTO"], PX4_SUB_MODE_AUTO["MISSION"])
 AUTO_LOITER = (PX4_MAIN_MODE["AUTO"], PX4_SUB_MODE_AUTO["LOITER"])
 #: Seconds logged after the last item's hold is over.
-TAIL_S = 1.0
+TAIL_S = 2.0
 
 _NAV = {
     "takeoff": mavlink.MAV_CMD_NAV_TAKEOFF,
@@ -77,11 +77,16 @@ _NAV = {
 @dataclass
 class MissionFlight:
     """One mission flown over MAVLink: the node's log and timing (``report``), the plan as
-    flown in PX4's local frame (``mission``) and its events as (node time [s], item, kind)."""
+    flown in PX4's local frame (``mission``) and its events as (node time [s], item, kind):
+    the guidance's for swingrt's flight; for PX4's, PX4's navigator rule replayed on the
+    logged path (:func:`swingrt.mission.replay_events`), with PX4's own reports of each item
+    done (MISSION_ITEM_REACHED, sent when an item's hold is over) in ``reported`` as (node
+    time [s], item)."""
 
     report: FlightReport
     mission: _core.Mission
     events: list[tuple[float, int, str]]
+    reported: list[tuple[float, int]] | None = None
 
 
 def time_limit(mission: _core.Mission) -> float:
@@ -297,16 +302,13 @@ def fly_px4_mission(
     session._drain()
     session.tel.reached.clear()
     limit = time_limit(local)
-    holds = [float(it["hold"]) for it in local.items]
     last = seqs[-1]
-    t0 = time.monotonic()
     _set_mode(session, AUTO_MISSION)
+    t0 = time.monotonic()
 
     def done() -> bool:
-        for t, seq in session.tel.reached:
-            if seq == last and time.monotonic() >= t + holds[-1] + TAIL_S:
-                return True
-        return False
+        # PX4 reports an item when it is done with it (its hold over), the last one too.
+        return any(seq == last and time.monotonic() >= t + TAIL_S for t, seq in session.tel.reached)
 
     try:
         report = session.watch(limit, done)
@@ -315,22 +317,21 @@ def fly_px4_mission(
             _set_mode(session, AUTO_LOITER)
         except FlightAbort as exc:
             log.warning("%s", exc)
-    events: list[tuple[float, int, str]] = [(0.0, 0, "started")]
     by_seq = {s: k for k, s in enumerate(seqs)}
-    for t, seq in session.tel.reached:
-        k = by_seq.get(seq)
-        if k is None:
-            continue
-        events.append((t - t0, k, "reached"))
-        kind = "completed" if k + 1 == len(seqs) else "left"
-        events.append((t - t0 + holds[k], k, kind))
+    reported: dict[int, float] = {}
+    for t, seq in session.tel.reached:  # PX4 may repeat a report: the first one counts
+        if seq in by_seq and by_seq[seq] not in reported:
+            reported[by_seq[seq]] = t - t0
     _finish(report, log_path)
-    if not any(kind == "completed" for _, _, kind in events):
+    if len(seqs) - 1 not in reported:
         raise FlightAbort(
             f"PX4's mission {mission.name!r} did not finish within {limit:.0f} s "
-            f"({len([e for e in events if e[2] == 'reached'])} of {len(seqs)} items reached)"
+            f"(PX4 reported {len(reported)} of {len(seqs)} items done)"
         )
-    return MissionFlight(report, local, events)
+    from swingrt.mission import replay_events
+
+    events = replay_events(local, report.columns)
+    return MissionFlight(report, local, events, sorted((t, k) for k, t in reported.items()))
 
 
 def fly_mission(

@@ -455,10 +455,15 @@ class FlightReport:
 
     def summary(self) -> str:
         j, c = self.jitter, self.compute
-        return (
+        text = (
             f"{self.ticks} ticks at {self.ts * 1e3:.1f} ms, {self.missed_deadlines} missed; "
             f"period jitter median {j['median'] * 1e3:.3f} ms p99 {j['p99'] * 1e3:.3f} ms "
-            f"max {j['max'] * 1e3:.3f} ms; compute median {c['median'] * 1e3:.3f} ms "
+            f"max {j['max'] * 1e3:.3f} ms"
+        )
+        if math.isnan(c["median"]):  # a watch: the vehicle flew itself, nothing computed
+            return text
+        return (
+            f"{text}; compute median {c['median'] * 1e3:.3f} ms "
             f"p99 {c['p99'] * 1e3:.3f} ms max {c['max'] * 1e3:.3f} ms"
         )
 
