@@ -157,14 +157,19 @@ def test_mpc_flight_has_no_missed_ticks_and_a_clean_lockstep(report):
 
 
 def test_hover_offboard_and_offboard_loss_failsafe(tmp_path):
-    """Hover holds within 0.3 m with no estimator reset; OFFBOARD is accepted, and a node
+    """On the x500 (PX4's reference airframe, flown with PX4's own gains): hover holds within
+    0.3 m and a steady attitude with no estimator reset; OFFBOARD is accepted, and a node
     that falls silent hands the vehicle to PX4's failsafe (Hold)."""
     from swingrt.hil.session import HilSession
     from swingrt.mavlink.link import connect
     from swingrt.mavlink.offboard import OffboardSession
 
     physics = tmp_path / "physics.parquet"
-    with HilSession(PX4_DIR, instance=2, workdir=tmp_path / "px4", log=physics, seed=3) as hil:
+    scenario = tmp_path / "x500.toml"
+    scenario.write_text('[vehicle]\nairframe = "x500"\n')
+    with HilSession(
+        PX4_DIR, scenario=scenario, instance=2, workdir=tmp_path / "px4", log=physics, seed=3
+    ) as hil:
         time.sleep(8.0)
         conn = connect(hil.onboard_url)
         try:
@@ -200,6 +205,9 @@ def test_hover_offboard_and_offboard_loss_failsafe(tmp_path):
     m = (tr.t > t_off - 6.0) & (tr.t < t_off)
     horiz = np.hypot(tr["pn"][m] - tr["pn"][m].mean(), tr["pe"][m] - tr["pe"][m].mean())
     assert horiz.max() < 0.3 and abs(tr["pd"][m].mean() + 10.0) < 0.3
+    # PX4's rate loop on the x500's rectangle neither limit-cycles nor leans.
+    tilt = np.degrees(np.hypot(tr["roll"][m], tr["pitch"][m]))
+    assert tilt.max() < 1.0, f"tilt up to {tilt.max():.2f} deg in hover"
     # The loss was PX4's failsafe: the status flags it after OFFBOARD.
     after = st["timestamp"] * 1e-6 > t_off
     assert st["failsafe"][after].any()

@@ -9,7 +9,12 @@ import pytest
 
 from swingrt._core import Scenario
 from swingrt.errors import ConfigError, DataError
-from swingrt.hil.params import HIL_RATE_GAIN_SCALE, px4_parameters, vehicle_from_px4
+from swingrt.hil.params import (
+    HIL_RATE_GAIN_SCALE,
+    hil_rate_gain_scale,
+    px4_parameters,
+    vehicle_from_px4,
+)
 from swingrt.io.px4_params import read_px4_parameters
 
 #: A vehicle unlike the built-in one: wider, heavier, other gains.
@@ -85,7 +90,7 @@ def test_a_vehicle_swingrt_cannot_fly_is_refused_by_name(changes, field):
     assert e.value.field == field
 
 
-def test_a_wide_x_is_flown_as_a_symmetric_one_and_says_so():
+def test_a_wide_x_keeps_its_roll_and_pitch_arms():
     # PX4's x500 (its SITL airframe): rotors at (±0.13, ±0.22) and (∓0.13, ∓0.20) m.
     geometry = {
         "CA_ROTOR0_PX": 0.13, "CA_ROTOR0_PY": 0.22, "CA_ROTOR0_KM": 0.05,
@@ -96,14 +101,18 @@ def test_a_wide_x_is_flown_as_a_symmetric_one_and_says_so():
     }  # fmt: skip
     sc, notes = vehicle_from_px4(_params(**geometry), mass=2.0)
     v = sc.to_dict()["vehicle"]
-    mean = (2 * math.hypot(0.13, 0.22) + 2 * math.hypot(0.13, 0.20)) / 4
-    assert v["arm"] == pytest.approx(mean) and v["yaw_arm"] == pytest.approx(0.05)
-    assert any("roll arm 0.210 m, pitch arm 0.130 m" in n for n in notes), notes
+    assert v["rotor_xy"] == pytest.approx([0.13, 0.21])
+    assert v["arm"] == pytest.approx(math.hypot(0.13, 0.21)) and v["yaw_arm"] == 0.05
+    assert any("|y| 0.200-0.220 m" in n and "|y| 0.210 m" in n for n in notes), notes
     assert sc.with_overrides({"vehicle": {"mass": 2.0 - 0.2}}).hover_thrust() == pytest.approx(
         0.60, abs=1e-6
     )
+    # Written back for PX4, the allocation is the rectangle read.
+    written = px4_parameters(sc)
+    assert [written[f"CA_ROTOR{i}_PY"] for i in range(4)] == [0.21, -0.21, -0.21, 0.21]
+    assert [written[f"CA_ROTOR{i}_PX"] for i in range(4)] == [0.13, -0.13, 0.13, -0.13]
     _, notes = vehicle_from_px4(_params())
-    assert not any("symmetric X" in n for n in notes)
+    assert not any("rectangle" in n for n in notes)
 
 
 def test_parameter_files(tmp_path):
@@ -148,3 +157,25 @@ def test_cli_writes_a_scenario_that_flies(cli, tmp_path):
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
     r = cli("vehicle", tmp_path / "missing.params")
     assert r.returncode == 2 and "no such file" in r.stderr
+
+
+def test_rate_authority_scales_with_arm_over_inertia_and_sets_the_hil_gain_scale():
+    honeybee = Scenario.builtin("hover")
+    roll, pitch = honeybee.rate_authority()
+    v = honeybee.to_dict()["vehicle"]
+    ix, iy, _ = v["inertia"]
+    # Same arms, so roll/pitch authority is the inertia's inverse ratio.
+    assert roll / pitch == pytest.approx(iy / ix, rel=1e-9)
+    d = v["arm"] / math.sqrt(2.0)
+    wide = honeybee.with_overrides(
+        {"vehicle": {"rotor_xy": [d, 2 * d], "arm": math.hypot(d, 2 * d)}}
+    )
+    assert wide.rate_authority() == pytest.approx([2 * roll, pitch], rel=1e-9)
+    heavy = honeybee.with_overrides({"vehicle": {"inertia": [2 * ix, 2 * iy, 1e-2]}})
+    assert heavy.rate_authority() == pytest.approx([roll / 2, pitch / 2], rel=1e-9)
+    # The Honeybee has more authority than PX4's x500 and flies PX4's loop at half gains;
+    # the x500 flies PX4's own gains.
+    x500 = honeybee.with_overrides({"vehicle": {"airframe": "x500"}})
+    assert hil_rate_gain_scale(honeybee) == HIL_RATE_GAIN_SCALE
+    assert hil_rate_gain_scale(x500) == 1.0
+    assert px4_parameters(x500)["MC_PITCHRATE_P"] == x500.to_dict()["controller"]["rate_p"][1]

@@ -161,6 +161,17 @@ def target_tracking(
     )
 
 
+def time_limit(mission: _core.Mission) -> float:
+    """Longest a flight of ``mission`` may take [s], simulated or on a vehicle: three times
+    its legs at their speeds, its holds and 30 s."""
+    items = mission.items
+    legs = sum(
+        math.dist(a["position"], b["position"]) / max(b["speed"] or 1.0, 0.1)
+        for a, b in zip(items, items[1:], strict=False)
+    )
+    return 1.0 + 3.0 * legs + sum(it["hold"] for it in items) + 30.0
+
+
 def fly(
     mission: _core.Mission,
     guidance: str | dict[str, Any],
@@ -182,12 +193,7 @@ def fly(
         check_model(model)
     if model is not None and lqr is not None:
         raise ConfigError("a mission flight has one controller: a model or the LQR", field="lqr")
-    items = mission.items
-    legs = sum(
-        math.dist(a["position"], b["position"]) / max(b["speed"] or 1.0, 0.1)
-        for a, b in zip(items, items[1:], strict=False)
-    )
-    limit = 1.0 + 3.0 * legs + sum(it["hold"] for it in items) + 30.0
+    limit = time_limit(mission)
     base = resolve(scenario)
     sc = base.with_overrides({"start": list(mission.start)})
     sim = _core.Simulator(resolve(sc, duration=limit, seed=seed))

@@ -1,5 +1,6 @@
 //! Scenarios built from a base and overrides, settings merges, and the linear-model drag.
 
+use swing_core::plant::VehicleParams;
 use swing_core::sim::Scenario;
 use swing_core::sysid::{IdentifySettings, LinearModel};
 
@@ -98,4 +99,22 @@ fn default_selection_check_covers_the_drag_of_a_step_into_strong_wind() {
         s.vehicle_drag
     );
     s.validate().unwrap();
+}
+
+#[test]
+fn naming_an_airframe_replaces_the_vehicle_then_the_file_applies() {
+    let sc =
+        Scenario::from_toml_over("[vehicle]\nairframe = \"x500\"\nmass = 2.4\n", "step").unwrap();
+    let x500 = VehicleParams::x500();
+    assert_eq!(sc.vehicle.mass, 2.4);
+    assert_eq!(sc.vehicle.inertia, x500.inertia);
+    assert_eq!(sc.vehicle.rotor_xy, x500.rotor_xy);
+    // Naming the airframe a scenario already has changes nothing.
+    let again = sc.with_overrides(toml::from_str("[vehicle]\nairframe = \"x500\"").unwrap());
+    assert_eq!(again.unwrap().vehicle.mass, 2.4);
+    let e = Scenario::from_toml_over("[vehicle]\nairframe = \"x600\"\n", "step").unwrap_err();
+    assert_eq!(e.field, "vehicle.airframe");
+    assert!(e.to_string().contains("honeybee, x500"), "{e}");
+    let e = Scenario::from_toml_over("[vehicle]\nrotor_xy = [0.1, 0.2]\n", "step").unwrap_err();
+    assert_eq!(e.field, "vehicle.arm");
 }

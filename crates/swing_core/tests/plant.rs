@@ -468,3 +468,57 @@ fn controllers_are_told_the_swing_rate_of_their_own_swing_source_not_the_truth()
     );
     assert!(at_lag < 0.5 * at_zero, "{at_lag} vs {at_zero}");
 }
+
+#[test]
+fn a_rectangular_x_turns_with_each_rotors_position_cross_its_thrust() {
+    // The x500's rotors, in PX4's order (front-right, rear-left, front-left, rear-right):
+    // the body moment is Σ r_i × (0, 0, −T_i) = (−Σ y_i T_i, Σ x_i T_i, ·).
+    let vehicle = VehicleParams::x500();
+    let [x, y] = vehicle.rotor_xy.unwrap();
+    let rotors = [(x, y), (-x, -y), (x, -y), (-x, y)];
+    let inertia = Vector3::from(vehicle.inertia);
+    let model = Model::new(vehicle, payload(0.2, 1.0));
+    let fx = Effects {
+        drag: false,
+        ..Effects::default()
+    };
+    let thrust = nalgebra::Vector4::new(5.3, 4.1, 4.6, 5.0);
+    let mut s = PlantState::at_rest(Vector3::zeros(), 0.0, 0.0, 0.0);
+    s.thrust = thrust;
+    let u = StepInput {
+        thrust_sp: thrust,
+        ..Default::default()
+    };
+    let d = model.derivative(&s, &u, fx);
+    let roll: f64 = (0..4).map(|i| -rotors[i].1 * thrust[i]).sum();
+    let pitch: f64 = (0..4).map(|i| rotors[i].0 * thrust[i]).sum();
+    assert!((d.rate.x * inertia.x - roll).abs() < 1e-12, "roll");
+    assert!((d.rate.y * inertia.y - pitch).abs() < 1e-12, "pitch");
+    // A square X is the same rule with both arms d/√2.
+    let square = VehicleParams::default();
+    assert_eq!(square.moment_arms(), [square.arm / 2f64.sqrt(); 2]);
+}
+
+#[test]
+fn the_x500_hovers_and_steps_under_the_cascade() {
+    // Built from its own airframe name over the default step, as a scenario file does.
+    let sc = Scenario::from_toml_over("[vehicle]\nairframe = \"x500\"\n", "step").unwrap();
+    assert_eq!(sc.vehicle, VehicleParams::x500());
+    let hover = sc.hover_thrust();
+    assert!((0.3..0.8).contains(&hover), "hover thrust {hover}");
+    let mut sim = Simulator::new(Scenario {
+        duration: 20.0,
+        ..sc
+    })
+    .unwrap();
+    sim.run_to_end().unwrap();
+    let s = sim.state();
+    // The payload still swings the vehicle's speed a little after 18 s (PX4 PID).
+    assert!((s.vel.x - 2.0).abs() < 0.1, "north speed {}", s.vel.x);
+    assert!(
+        (s.pos.z + 10.0).abs() < 0.1,
+        "altitude error {}",
+        s.pos.z + 10.0
+    );
+    assert!(s.vel.y.abs() < 0.02 && s.rate.norm() < 0.05);
+}

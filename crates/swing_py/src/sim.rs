@@ -131,6 +131,12 @@ impl PyScenario {
         self.inner.hover_thrust()
     }
 
+    /// Roll and pitch angular acceleration [rad/s²] per unit of normalised torque at hover
+    /// (the rate loop's plant gain).
+    fn rate_authority(&self) -> [f64; 2] {
+        self.inner.rate_authority()
+    }
+
     /// Total mass [kg] this vehicle's motors hold at the normalised `hover` thrust (the
     /// inverse of `hover_thrust`).
     fn mass_hovering_at(&self, hover: f64) -> f64 {

@@ -35,6 +35,13 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "cable-angle sensor on the airframe, or none (the IMU estimate)",
     )
     p.add_argument(
+        "--airframe",
+        default="honeybee",
+        metavar="NAME",
+        help="the built-in vehicle every flight flies: honeybee (the thesis's, default) or "
+        "x500 (PX4's reference quadrotor of its SITL)",
+    )
+    p.add_argument(
         "--no-twin",
         action="store_true",
         help="with --px4: select the model without flying it first on the vehicle PX4's "
@@ -77,6 +84,7 @@ def run(args) -> int:
             quiet=args.quiet,
             twin=not args.no_twin,
             swing_source=args.swing_source,
+            airframe=args.airframe,
         )
         print((Path(args.out) / "metrics.md").read_text(encoding="utf-8"))
         by = {r["controller"]: r for r in rows}
@@ -94,11 +102,11 @@ def run(args) -> int:
         )
     exp = Experiment(
         name="default-step",
-        description="Honeybee with 0.2 kg on 1 m: 2 m/s North velocity step at t = 2 s "
-        f"after a 300 s random-step training flight (thesis table 4.1); swing source "
+        description=f"{args.airframe} with 0.2 kg on 1 m: 2 m/s North velocity step at "
+        "t = 2 s after a 300 s random-step training flight (thesis table 4.1); swing source "
         f"{args.swing_source}.",
         duration=30.0,
-        common={"sensors": {"swing": args.swing_source}},
+        common={"sensors": {"swing": args.swing_source}, "vehicle": {"airframe": args.airframe}},
     )
     rows = run_experiment(exp, args.out, seed=args.seed, quiet=args.quiet)
     out = Path(args.out)
@@ -119,6 +127,6 @@ def run(args) -> int:
     if mpc:
         ratio = mpc["swing_iae_deg_s"] / max(pid["swing_iae_deg_s"], 1e-12)
         print(f"MPC swing IAE is {ratio:.2f}× PX4 PID's")
-    print(f"swing source: {args.swing_source} (every flight; the model's diagnostics)")
+    print(f"vehicle: {args.airframe}; swing source: {args.swing_source} (every flight)")
     print(f"report: {out}/ (metrics.csv, metrics.md, figures, traces, model)")
     return 0

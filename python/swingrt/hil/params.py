@@ -20,15 +20,19 @@ __all__ = [
     "HIL_RATE_GAIN_SCALE",
     "PX4_CONTROLLER",
     "SDLOG_PROFILE_WITH_DEBUG",
+    "hil_rate_gain_scale",
     "px4_parameters",
     "vehicle_from_px4",
 ]
 
-#: Scale of the roll and pitch rate gains on PX4 in the loop. In lockstep PX4's rate loop runs
-#: at the 250 Hz sensor rate behind its gyro filter; with the Honeybee's small inertia the
-#: cascade's gains then limit-cycle at ~20 Hz on PX4 (pitch ±2.8 rad/s, torque saturated,
-#: measured), while half of them hold attitude to 0.03° (the built-in cascade runs at 500 Hz
-#: unfiltered and needs no scaling).
+#: Scale of the roll and pitch rate gains on PX4 in the loop, for a vehicle with more rate
+#: authority (:meth:`Scenario.rate_authority`) than PX4's reference x500, the airframe PX4's
+#: default gains are tuned for. In lockstep PX4's rate loop runs at the 250 Hz sensor rate
+#: behind its gyro filter; with the Honeybee's small inertia (2.7x the x500's authority in
+#: roll, 6.6x in pitch) the cascade's gains then limit-cycle at ~20 Hz on PX4 (pitch
+#: ±2.8 rad/s, torque saturated, measured), while half of them hold attitude to 0.03° (the
+#: built-in cascade runs at 500 Hz unfiltered and needs no scaling). The x500 itself flies
+#: PX4's gains unscaled, as PX4's own Gazebo SITL does.
 HIL_RATE_GAIN_SCALE = 0.5
 
 #: PX4's default log profile (131) plus the debug-topics bit (32): logs ``debug_vect``.
@@ -68,26 +72,28 @@ _HIL_SCALED = frozenset(f"MC_{a}RATE_{g}" for a in _AXES[:2] for g in "PID")
 def px4_parameters(scenario: Scenario, *, takeoff_altitude: float | None = None) -> dict:
     """``{PX4 parameter name: value}`` for flying ``scenario``'s vehicle on PX4.
 
-    The allocation places motor i at (±d/√2, ±d/√2) with yaw moment ratio ±R_N (table 6.1);
+    The allocation places motor i at (±x, ±y), the vehicle's ``rotor_xy`` (a square X:
+    ±d/√2 both), with yaw moment ratio ±R_N (table 6.1);
     PX4's linear thrust model (``THR_MDL_FAC`` 0) and ``MPC_THR_HOVER`` = the command of
     eq. 6.1 that carries vehicle + payload, as in the built-in cascade; the cascade's gains.
     """
     d = scenario.to_dict()
     v, c = d["vehicle"], d["controller"]
-    arm = v["arm"] / math.sqrt(2.0)
+    x, y = v.get("rotor_xy") or (v["arm"] / math.sqrt(2.0),) * 2
     params: dict[str, float | int] = {"CA_AIRFRAME": 0, "CA_ROTOR_COUNT": 4}
     for i, (sx, sy, sk) in enumerate(_ROTORS):
-        params[f"CA_ROTOR{i}_PX"] = round(sx * arm, 6)
-        params[f"CA_ROTOR{i}_PY"] = round(sy * arm, 6)
+        params[f"CA_ROTOR{i}_PX"] = round(sx * x, 6)
+        params[f"CA_ROTOR{i}_PY"] = round(sy * y, 6)
         params[f"CA_ROTOR{i}_PZ"] = 0.0
         params[f"CA_ROTOR{i}_KM"] = round(sk * v["yaw_arm"], 6)
     params["THR_MDL_FAC"] = 0.0
     params["MPC_THR_HOVER"] = round(scenario.hover_thrust(), 4)
+    scale = hil_rate_gain_scale(scenario)
     for name in _WRITTEN:
         field, index, factor = PX4_CONTROLLER[name]
         value = c[field] if index is None else c[field][index]
         if name in _HIL_SCALED:
-            value *= HIL_RATE_GAIN_SCALE
+            value *= scale
         params[name] = round(value / factor, 6)
     # Flight data: log the swing sensor (debug topics) from arming on.
     params["SDLOG_PROFILE"] = SDLOG_PROFILE_WITH_DEBUG
@@ -101,6 +107,19 @@ def px4_parameters(scenario: Scenario, *, takeoff_altitude: float | None = None)
     if takeoff_altitude is not None:
         params["MIS_TAKEOFF_ALT"] = round(float(takeoff_altitude), 2)
     return params
+
+
+def hil_rate_gain_scale(scenario: Scenario) -> float:
+    """The factor on ``scenario``'s roll and pitch rate gains on PX4 in the loop:
+    :data:`HIL_RATE_GAIN_SCALE` when its vehicle has more rate authority on either axis than
+    the x500 with the same payload, else 1."""
+    payload = scenario.to_dict()["payload"]
+    reference = Scenario.from_dict(
+        {"vehicle": {"airframe": "x500"}, "payload": payload}, base="hover"
+    )
+    if max(scenario.rate_authority()) > max(reference.rate_authority()):
+        return HIL_RATE_GAIN_SCALE
+    return 1.0
 
 
 # ---------------------------------------------------------------------- PX4 -> scenario
@@ -134,8 +153,8 @@ PX4_CONTROLLER: dict[str, tuple[str, int | None, float]] = {
     "MPC_THR_XY_MARG": ("thrust_xy_margin", None, 1.0),
 }
 
-#: Spread of the rotors' |x| and |y|, as a fraction of the arm, beyond which the notes say
-#: that the frame was flown as a symmetric X.
+#: Spread of the rotors' |x| or |y|, as a fraction of the arm, beyond which the notes say
+#: that the frame was flown as a rectangle at their mean.
 _X_TOLERANCE = 0.05
 
 
@@ -144,20 +163,23 @@ def vehicle_from_px4(
 ) -> tuple[Scenario, list[str]]:
     """The scenario of the vehicle PX4's ``params`` describe, and what it could not know.
 
-    Read: the rotor geometry of the control allocation (a quad X: arm and yaw moment arm,
-    in PX4's rotor order), the cascade's gains, rates and limits (:data:`PX4_CONTROLLER`;
-    the North/East velocity gains are PX4's one horizontal gain), and the hover thrust
-    ``MPC_THR_HOVER``: with ``mass`` [kg] given, the motors' thrust curve is the nominal one
-    scaled so that this mass hovers there; without, the mass is the one the nominal curve
-    hovers there (stated). Not in PX4's parameters and left nominal (``base``'s, the
-    built-in Honeybee by default), stated: the drag, the motor lag, the loop rates; the
+    Read: the rotor geometry of the control allocation (a quad X in PX4's rotor order: the
+    rotors' |x|, |y| and yaw moment ratio), the cascade's gains, rates and limits
+    (:data:`PX4_CONTROLLER`; the North/East velocity gains are PX4's one horizontal gain),
+    and the hover thrust ``MPC_THR_HOVER``: with ``mass`` [kg] given, the motors' thrust
+    curve is the nominal one scaled so that this mass hovers there; without, the mass is the
+    one the nominal curve hovers there (stated). Not in PX4's parameters and left nominal
+    (``base``'s, the built-in Honeybee by default), stated: the drag, the motor lag, the
+    loop rates; the
     inertia is the nominal one scaled with the mass and the arm squared."""
     base = base or Scenario.builtin("step")
     b = base.to_dict()
     vehicle = dict(b["vehicle"])
     controller = dict(b["controller"])
-    arm, yaw_arm, notes = _quad_x(params)
+    rotor_xy, yaw_arm, notes = _quad_x(params)
+    arm = math.hypot(*rotor_xy)
     vehicle["arm"], vehicle["yaw_arm"] = arm, yaw_arm
+    vehicle["rotor_xy"] = list(rotor_xy)
     read = []
     for name, (field, index, factor) in PX4_CONTROLLER.items():
         if name not in params:
@@ -208,11 +230,11 @@ def vehicle_from_px4(
     return sc, notes
 
 
-def _quad_x(params: dict[str, float]) -> tuple[float, float, list[str]]:
-    """(arm [m], yaw moment arm [m], notes) of PX4's allocation, checked to be a quadrotor
-    in PX4's X rotor order (:data:`_ROTORS`). swingrt flies a symmetric X: rotors off the
-    diagonals or at unequal distances (a wide X such as the x500) are flown at their mean
-    distance, and the notes give the roll and pitch arms that were averaged."""
+def _quad_x(params: dict[str, float]) -> tuple[tuple[float, float], float, list[str]]:
+    """((|x|, |y|) of the rotors [m], yaw moment ratio [m], notes) of PX4's allocation,
+    checked to be a quadrotor in PX4's X rotor order (:data:`_ROTORS`). swingrt flies a
+    rectangular X: rotors at unequal |x| or |y| (the x500's |y| is 0.20 and 0.22) are flown
+    at their mean, and the notes say so."""
     count = params.get("CA_ROTOR_COUNT")
     if count != 4:
         raise ConfigError(
@@ -233,17 +255,15 @@ def _quad_x(params: dict[str, float]) -> tuple[float, float, list[str]]:
         xs.append(abs(px))
         ys.append(abs(py))
         moments.append(abs(km))
-    arm = sum(math.hypot(x, y) for x, y in zip(xs, ys, strict=True)) / 4.0
-    pitch_arm, roll_arm = sum(xs) / 4.0, sum(ys) / 4.0
+    x, y = sum(xs) / 4.0, sum(ys) / 4.0
     notes = []
-    spread = max(max(xs) - min(xs), max(ys) - min(ys), abs(pitch_arm - roll_arm))
-    if spread > _X_TOLERANCE * arm:
+    spread = max(max(xs) - min(xs), max(ys) - min(ys))
+    if spread > _X_TOLERANCE * math.hypot(x, y):
         notes.append(
-            f"rotors not a symmetric X (roll arm {roll_arm:.3f} m, pitch arm "
-            f"{pitch_arm:.3f} m): flown as one with their mean distance {arm:.3f} m "
-            f"(roll and pitch arm {arm / math.sqrt(2.0):.3f} m)"
+            f"rotors not a rectangle (|x| {min(xs):.3f}-{max(xs):.3f} m, |y| "
+            f"{min(ys):.3f}-{max(ys):.3f} m): flown at their mean |x| {x:.3f} m, |y| {y:.3f} m"
         )
-    return arm, sum(moments) / 4.0, notes
+    return (x, y), sum(moments) / 4.0, notes
 
 
 def _mass_hovering_at(base: Scenario, hover: float) -> float:

@@ -20,6 +20,7 @@ import math
 import shutil
 import sys
 import time
+import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -58,6 +59,7 @@ def run_on_px4(
     quiet: bool = False,
     twin: bool = True,
     swing_source: str = "sensor",
+    airframe: str = "honeybee",
 ) -> list[dict[str, Any]]:
     """Run the whole comparison on PX4 (module doc); returns the metrics rows. With
     ``twin`` the model selection flies each candidate first on the vehicle PX4's
@@ -66,7 +68,8 @@ def run_on_px4(
     the log of. ``swing_source = "imu"``: no sensor on the cable (the simulator sends PX4 no
     swing); the model is identified on the swing estimated from PX4's own IMU in its ULog,
     and every flight's node estimates it the same way from HIGHRES_IMU; the metrics read
-    the simulator's true swing."""
+    the simulator's true swing. ``airframe``: the built-in vehicle swingrt's physics flies
+    under PX4 (its geometry, gains and hover thrust written to PX4's parameters)."""
     from swingrt import sysid
     from swingrt.experiments.schema import Experiment
     from swingrt.hil.session import HilSession
@@ -96,17 +99,24 @@ def run_on_px4(
     out.mkdir(parents=True, exist_ok=True)
     node: dict[str, Any] = {}
     estimator = None
-    if swing_source == "imu":
+    if swing_source == "imu" or airframe != "honeybee":
         if scenario is not None:
-            raise ConfigError("--swing-source imu: the built-in vehicle's scenario only")
+            raise ConfigError(
+                "--swing-source imu and --airframe: the built-in scenario only", field="scenario"
+            )
         from swingrt.io.atomic import write_text_atomic
         from swingrt.scenario import resolve
 
         scenario = out / "scenario.toml"
-        write_text_atomic(scenario, '[sensors]\nswing = "imu"\n')
-        estimator = resolve(scenario, default="hover").to_dict()["sensors"]["estimator"]
-        # Every flight's node estimates the swing from HIGHRES_IMU as the model expects.
-        node["swing_estimator"] = estimator
+        text = f'[vehicle]\nairframe = "{airframe}"\n'
+        if swing_source == "imu":
+            text += '\n[sensors]\nswing = "imu"\n'
+        resolved = resolve(tomllib.loads(text), default="hover")  # a bad name stops here
+        write_text_atomic(scenario, text)
+        if swing_source == "imu":
+            estimator = resolved.to_dict()["sensors"]["estimator"]
+            # Every flight's node estimates the swing from HIGHRES_IMU as the model expects.
+            node["swing_estimator"] = estimator
     case = "default-step"
     echo = None if quiet else (lambda line: print(line, file=sys.stderr, flush=True))
 

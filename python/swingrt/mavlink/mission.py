@@ -36,13 +36,14 @@ import numpy as np
 
 from swingrt import _core
 from swingrt.errors import ConfigError, ControlError, FlightAbort, LinkError
-from swingrt.mavlink.link import PX4_MAIN_MODE, PX4_SUB_MODE_AUTO, mavlink, mode_name
+from swingrt.mavlink.link import PX4_MAIN_MODE, PX4_SUB_MODE_AUTO, mavlink
 from swingrt.mavlink.offboard import (
     MASK_ACC_ALT_HOLD,
     FlightReport,
     OffboardSession,
     _finish,
 )
+from swingrt.mission import time_limit
 
 __all__ = [
     "MissionFlight",
@@ -52,7 +53,6 @@ __all__ = [
     "upload",
     "fly_px4_mission",
     "fly_mission",
-    "time_limit",
 ]
 
 log = logging.getLogger("swingrt.mavlink.mission")
@@ -87,17 +87,6 @@ class MissionFlight:
     mission: _core.Mission
     events: list[tuple[float, int, str]]
     reported: list[tuple[float, int]] | None = None
-
-
-def time_limit(mission: _core.Mission) -> float:
-    """Longest a flight of ``mission`` may take [s]: three times its legs at their speeds,
-    its holds and 30 s (as the simulator's :func:`swingrt.mission.fly`)."""
-    items = mission.items
-    legs = sum(
-        math.dist(a["position"], b["position"]) / max(b["speed"] or 1.0, 0.1)
-        for a, b in zip(items, items[1:], strict=False)
-    )
-    return 1.0 + 3.0 * legs + sum(it["hold"] for it in items) + 30.0
 
 
 def _command(conn, command: int, *params: float) -> None:
@@ -262,24 +251,6 @@ def upload(conn, items: list[dict], *, timeout: float = PROTOCOL_TIMEOUT) -> Non
         deadline = time.monotonic() + timeout
 
 
-def _set_mode(session: OffboardSession, mode: tuple[int, int], timeout: float = 5.0) -> None:
-    """Ask for ``mode`` until the heartbeat shows it; FlightAbort after ``timeout`` s."""
-    deadline = time.monotonic() + timeout
-    next_try = 0.0
-    while time.monotonic() < deadline:
-        now = time.monotonic()
-        if now >= next_try:
-            session._request_mode(*mode)
-            next_try = now + 0.5
-        time.sleep(0.02)
-        session._drain()
-        if session.tel.mode == mode:
-            log.info("vehicle in %s", mode_name(*mode))
-            return
-    now_in = mode_name(*session.tel.mode) if session.tel.mode else "no mode"
-    raise FlightAbort(f"vehicle did not enter {mode_name(*mode)} within {timeout:g} s ({now_in})")
-
-
 def fly_px4_mission(
     conn,
     mission: _core.Mission,
@@ -299,11 +270,11 @@ def fly_px4_mission(
     local = mission.shifted((dn, de, 0.0))
     items, seqs = px4_items(local, origin)
     upload(conn, items)
-    session._drain()
+    session.poll()
     session.tel.reached.clear()
     limit = time_limit(local)
     last = seqs[-1]
-    _set_mode(session, AUTO_MISSION)
+    session.set_mode(AUTO_MISSION)
     t0 = time.monotonic()
 
     def done() -> bool:
@@ -314,7 +285,7 @@ def fly_px4_mission(
         report = session.watch(limit, done)
     finally:
         try:
-            _set_mode(session, AUTO_LOITER)
+            session.set_mode(AUTO_LOITER)
         except FlightAbort as exc:
             log.warning("%s", exc)
     by_seq = {s: k for k, s in enumerate(seqs)}

@@ -525,6 +525,30 @@ class OffboardSession:
         )
         self._next_beat = 0.0
 
+    def set_mode(self, mode: tuple[int, int], timeout: float = 5.0) -> None:
+        """Ask for PX4 ``mode`` (main, sub) until the heartbeat shows it; FlightAbort after
+        ``timeout`` s."""
+        deadline = time.monotonic() + timeout
+        next_try = 0.0
+        while time.monotonic() < deadline:
+            now = time.monotonic()
+            if now >= next_try:
+                self._request_mode(*mode)
+                next_try = now + 0.5
+            time.sleep(0.02)
+            self._drain()
+            if self.tel.mode == mode:
+                log.info("vehicle in %s", mode_name(*mode))
+                return
+        now_in = mode_name(*self.tel.mode) if self.tel.mode else "no mode"
+        raise FlightAbort(
+            f"vehicle did not enter {mode_name(*mode)} within {timeout:g} s ({now_in})"
+        )
+
+    def poll(self) -> None:
+        """Read what the vehicle sent into the telemetry (bounded) and keep the heartbeat."""
+        self._drain()
+
     # -------------------------------------------------------------- plumbing
 
     def _drain(self) -> None:

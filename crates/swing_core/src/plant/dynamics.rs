@@ -193,6 +193,7 @@ pub struct Model {
     inertia: Vector3<f64>,
     masses: [f64; MAX_LINKS + 1],
     lengths: [f64; MAX_LINKS],
+    arms: [f64; 2],
     gravity: f64,
 }
 
@@ -235,7 +236,9 @@ impl Model {
         let inertia = Vector3::from(vehicle.inertia);
         let masses = [vehicle.mass, payload.mass, payload.mass2];
         let lengths = [payload.length, payload.length2];
+        let arms = vehicle.moment_arms();
         Self {
+            arms,
             vehicle,
             payload,
             links,
@@ -293,7 +296,13 @@ impl Model {
         if fx.rotors {
             let [dt, da, de, dr] = mix(&s.thrust);
             g0 += rot * Vector3::new(0.0, 0.0, -dt);
-            let moment = Vector3::new(v.arm * da, v.arm * de, v.yaw_arm * dr);
+            // δ_A, δ_E carry the square X's 1/√2; a rectangle's arms replace it.
+            let [pitch_arm, roll_arm] = self.arms;
+            let moment = Vector3::new(
+                roll_arm * std::f64::consts::SQRT_2 * da,
+                pitch_arm * std::f64::consts::SQRT_2 * de,
+                v.yaw_arm * dr,
+            );
             let iw = self.inertia.component_mul(&s.rate);
             d_rate = (moment - s.rate.cross(&iw)).component_div(&self.inertia);
             // q̇ = ½ q ⊗ (0, ω), eq. 3.13.

@@ -11,5 +11,5 @@ pub use axis::AxisState;
 pub use dynamics::{Effects, Model, PlantState, StepInput};
 pub use events::{apply_payload_events, check_events, PayloadAction, PayloadEvent};
 pub use linear::PendulumModel;
-pub use params::{PayloadKind, PayloadParams, VehicleParams, GRAVITY};
+pub use params::{Airframe, PayloadKind, PayloadParams, VehicleParams, GRAVITY};
 pub use wind::{Wind, WindParams};

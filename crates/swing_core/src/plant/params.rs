@@ -7,14 +7,68 @@ use crate::config::{non_negative, positive, ConfigError};
 /// Standard gravity [m/s²].
 pub const GRAVITY: f64 = 9.80665;
 
+/// A built-in vehicle: the parameters a scenario's `[vehicle]` table starts from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Airframe {
+    /// The thesis's Honeybee (table 6.1).
+    #[default]
+    Honeybee,
+    /// PX4's reference quadrotor, the x500 of its Gazebo SITL (model `x500`, airframe 4001).
+    X500,
+}
+
+impl Airframe {
+    /// Every built-in airframe, in the order the CLI lists them.
+    pub const ALL: [Airframe; 2] = [Airframe::Honeybee, Airframe::X500];
+
+    /// The name a scenario file uses.
+    pub fn name(self) -> &'static str {
+        match self {
+            Airframe::Honeybee => "honeybee",
+            Airframe::X500 => "x500",
+        }
+    }
+
+    /// The airframe of that name; the error lists the known ones.
+    pub fn from_name(name: &str) -> Result<Self, ConfigError> {
+        Self::ALL
+            .into_iter()
+            .find(|a| a.name() == name)
+            .ok_or_else(|| {
+                let known: Vec<&str> = Self::ALL.iter().map(|a| a.name()).collect();
+                ConfigError::new(
+                    "airframe",
+                    format!("unknown airframe {name:?} (built in: {})", known.join(", ")),
+                )
+            })
+    }
+
+    /// The airframe's parameters.
+    pub fn params(self) -> VehicleParams {
+        match self {
+            Airframe::Honeybee => VehicleParams::default(),
+            Airframe::X500 => VehicleParams::x500(),
+        }
+    }
+}
+
 /// Rigid-body, actuator and drag parameters of the multirotor (defaults: Honeybee, table 6.1).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct VehicleParams {
+    /// The built-in vehicle these parameters start from (naming another one in a scenario
+    /// file replaces the whole table before the file's own values apply).
+    pub airframe: Airframe,
     /// Vehicle mass m_Q including companion computer and swing sensor [kg].
     pub mass: f64,
     /// Distance from the CoM to each motor d [m].
     pub arm: f64,
+    /// Rotor position |x|, |y| in body axes [m] of a rectangular X (PX4's `CA_ROTOR*_PX`,
+    /// `_PY`): the pitch and roll moment arms. Unset: a square X, both d/√2. When set, `arm`
+    /// must be their distance √(x² + y²).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rotor_xy: Option<[f64; 2]>,
     /// Virtual yaw moment arm R_N [m].
     pub yaw_arm: f64,
     /// Principal moments of inertia (I_xx, I_yy, I_zz) [kg·m²].
@@ -36,8 +90,10 @@ pub struct VehicleParams {
 impl Default for VehicleParams {
     fn default() -> Self {
         Self {
+            airframe: Airframe::Honeybee,
             mass: 0.952,
             arm: 0.11,
+            rotor_xy: None,
             yaw_arm: 7.997e-3,
             inertia: [2.00e-3, 1.32e-3, 3.35e-3],
             drag: [0.096, 0.096, 0.256],
@@ -50,11 +106,65 @@ impl Default for VehicleParams {
     }
 }
 
+/// Distance the rotors of a rectangular X may be off `arm` [m] (rounding in a file).
+const ARM_TOLERANCE: f64 = 1e-3;
+
 impl VehicleParams {
+    /// PX4's x500 as its Gazebo model describes it: 2.0 kg, inertia (0.0217, 0.0217,
+    /// 0.04) kg·m², rotors at |x| 0.13 and |y| 0.20–0.22 m (their mean 0.21 here),
+    /// thrust k·ω² with k = 8.54858e-6 N·s² and ω = 150–1000 rad/s over the command
+    /// (written as eq. 6.1's polynomial in PWM), moment ratio 0.016 m, motor lag the mean of
+    /// its 12.5 ms up and 25 ms down. The Gazebo model has no body drag, only rotor drag
+    /// linear in speed (8.06428e-5 N·s per rad/s per rotor); the quadratic drag here matches
+    /// it at 2 m/s in hover.
+    pub fn x500() -> Self {
+        let (k, w_min, w_max) = (8.54858e-6, 150.0, 1000.0);
+        // ω = w_min + (w_max − w_min)(pwm − 1000)/1000 = a·pwm + b
+        let a = (w_max - w_min) / 1000.0;
+        let b = w_min - 1000.0 * a;
+        let (x, y): (f64, f64) = (0.13, 0.21);
+        let rotor_drag = 4.0 * 8.06428e-5 * (0.25 * 2.0 * GRAVITY / k).sqrt();
+        let drag = rotor_drag * 2.0 / (0.5 * 1.225 * 2.0 * 2.0);
+        Self {
+            airframe: Airframe::X500,
+            mass: 2.0,
+            arm: x.hypot(y),
+            rotor_xy: Some([x, y]),
+            yaw_arm: 0.016,
+            inertia: [0.02166666666666667, 0.02166666666666667, 0.04],
+            drag: [drag, drag, 2.0 * drag],
+            motor_tau: 0.5 * (0.0125 + 0.025),
+            thrust_poly: [0.0, k * a * a, 2.0 * k * a * b, k * b * b],
+            pwm_min: 1000.0,
+            pwm_max: 2000.0,
+            air_density: 1.225,
+        }
+    }
+
+    /// Pitch and roll moment arms [m]: the rotors' |x| and |y|.
+    pub fn moment_arms(&self) -> [f64; 2] {
+        self.rotor_xy
+            .unwrap_or([self.arm * std::f64::consts::FRAC_1_SQRT_2; 2])
+    }
+
     /// Check physical sense; the error names the offending field.
     pub fn validate(&self) -> Result<(), ConfigError> {
         positive("mass", self.mass)?;
         positive("arm", self.arm)?;
+        if let Some([x, y]) = self.rotor_xy {
+            positive("rotor_xy[0]", x)?;
+            positive("rotor_xy[1]", y)?;
+            if (x.hypot(y) - self.arm).abs() > ARM_TOLERANCE {
+                return Err(ConfigError::new(
+                    "arm",
+                    format!(
+                        "must be the rotors' distance √(x² + y²) = {:.4} m of rotor_xy (got {})",
+                        x.hypot(y),
+                        self.arm
+                    ),
+                ));
+            }
+        }
         positive("yaw_arm", self.yaw_arm)?;
         for (i, v) in self.inertia.iter().enumerate() {
             positive(&format!("inertia[{i}]"), *v)?;

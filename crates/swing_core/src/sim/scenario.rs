@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::config::{finite, in_range, non_negative, positive, ConfigError};
 use crate::control::px4::{AxisSetpoint, Px4Params};
-use crate::plant::{PayloadParams, VehicleParams, WindParams};
+use crate::plant::{Airframe, PayloadParams, VehicleParams, WindParams};
 use crate::sensors::SensorParams;
 
 /// Sensor noise and bias (seeded by the scenario seed).
@@ -241,6 +241,33 @@ impl RandomSteps {
     }
 }
 
+/// Where `over` names another airframe (`[vehicle] airframe = "x500"`) than `base`'s, put
+/// that airframe's whole vehicle table in `base`, so the file's other vehicle values apply to
+/// it and nothing of the old vehicle is left.
+fn select_airframe(base: &mut toml::Table, over: &toml::Table) -> Result<(), ConfigError> {
+    let named = over
+        .get("vehicle")
+        .and_then(|v| v.as_table())
+        .and_then(|v| v.get("airframe"));
+    let Some(named) = named else {
+        return Ok(());
+    };
+    let airframe = named
+        .as_str()
+        .ok_or_else(|| ConfigError::new("airframe", "must be a name").within("vehicle"))
+        .and_then(|n| Airframe::from_name(n).map_err(|e| e.within("vehicle")))?;
+    let current = base
+        .get("vehicle")
+        .and_then(|v| v.get("airframe"))
+        .and_then(|v| v.as_str());
+    if current != Some(airframe.name()) {
+        let table = toml::Value::try_from(airframe.params())
+            .map_err(|e| ConfigError::new("vehicle", e.to_string()))?;
+        base.insert("vehicle".into(), table);
+    }
+    Ok(())
+}
+
 /// Longest scenario [s] (a day): beyond it a typo (`duration = 4294967296`) would ask for a
 /// trace of terabytes and a run of centuries, so it is refused by name instead.
 pub const MAX_DURATION: f64 = 86_400.0;
@@ -371,6 +398,7 @@ impl Scenario {
                 ))
             }
         };
+        select_airframe(&mut base, &over)?;
         crate::config::merge_tables(&mut base, over);
         let sc: Scenario = crate::config::from_toml_value(toml::Value::Table(base))?;
         sc.validate()?;
@@ -403,6 +431,33 @@ impl Scenario {
             &self.vehicle,
             self.vehicle.mass + self.payload.total_mass(),
         )
+    }
+
+    /// Roll and pitch angular acceleration [rad/s²] per unit of the cascade's normalised
+    /// torque at hover: the rate loop's plant gain, what its gains must suit (the motors'
+    /// slope at hover through the quad-X mixing, the moment arms, the inertia).
+    pub fn rate_authority(&self) -> [f64; 2] {
+        use crate::control::px4::mix_quad_x;
+        let v = &self.vehicle;
+        let hover = self.hover_thrust();
+        let at = |torque: nalgebra::Vector3<f64>| {
+            let cmd = mix_quad_x(hover, &torque);
+            let thrust = nalgebra::Vector4::from_fn(|m, _| v.thrust_at(cmd[m]));
+            crate::plant::dynamics::mix(&thrust)
+        };
+        let h = 1e-3;
+        let (zero, roll, pitch) = (
+            at(nalgebra::Vector3::zeros()),
+            at(nalgebra::Vector3::new(h, 0.0, 0.0)),
+            at(nalgebra::Vector3::new(0.0, h, 0.0)),
+        );
+        // δ_A, δ_E carry the square X's 1/√2 (see `plant::dynamics::mix`).
+        let [pitch_arm, roll_arm] = v.moment_arms();
+        let k = std::f64::consts::SQRT_2 / h;
+        [
+            roll_arm * k * (roll[1] - zero[1]) / v.inertia[0],
+            pitch_arm * k * (pitch[2] - zero[2]) / v.inertia[1],
+        ]
     }
 
     /// Check physical sense of every section; the error names the field by dotted path.
