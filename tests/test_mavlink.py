@@ -496,6 +496,32 @@ def test_fly_mission_with_pd_double_and_clean_handback(vehicle, tmp_path):
     assert "no setpoint for" not in vehicle_log, vehicle_log
 
 
+def test_a_velocity_output_method_flies_px4s_velocity_loop_over_mavlink(vehicle, tmp_path):
+    """A method that commands PX4's velocity loop (the ZVD input shaper, undamped mode of
+    ω = π rad/s: impulses 1/4, 1/2, 1/4 a half period, 1 s, apart) goes out as velocity
+    setpoints: the node's command is the shaped staircase and the vehicle follows it."""
+    from swingrt import _core
+    from swingrt.io import load_flight
+    from swingrt.mavlink.offboard import Mission, fly
+
+    url, _ = vehicle
+    shaper = _core.Controller.shaper(math.pi, 0.0, 1)
+    assert shaper.output == "velocity"
+    mission = Mission.from_toml(write_mission(tmp_path / "m.toml", 1.0, 7.0, 8.0))
+    conn = connect(url)
+    try:
+        fly(conn, shaper, ts=shaper.period, axes=1, mission=mission,
+            log_path=tmp_path / "node.parquet")  # fmt: skip
+    finally:
+        conn.close()
+    tr = load_flight(tmp_path / "node.parquet", columns=["vn", "vel_sp_n"])
+    t, sp, vn = tr["t"], tr["vel_sp_n"], tr["vn"]
+    for lo, hi, want in ((1.15, 1.85, 0.5), (2.15, 2.85, 1.5), (3.15, 6.9, 2.0)):
+        held = sp[(t > lo) & (t < hi)]
+        assert np.allclose(held, want, atol=1e-9), (lo, hi, np.unique(held))
+    assert 1.8 < np.mean(vn[(t > 5.5) & (t < 7.0)]) < 2.2
+
+
 def test_failsafe_when_node_is_killed(vehicle, tmp_path):
     url, _ = vehicle
     obs = observer(url)
@@ -712,6 +738,87 @@ def test_fly_without_a_swing_sensor_on_the_imu_that_sitl_streams(tmp_path):
     assert np.corrcoef(est, sim_est)[0, 1] > 0.95
     assert np.degrees(np.median(np.abs(est - sim_est))) < 0.5
     pid = simulate(str(imu), duration=14.0)
+    assert np.abs(truth).max() < 0.5 * np.abs(np.asarray(pid["swing_true_n"])).max()
+
+
+def test_the_cable_sensor_on_the_airframe_is_composed_with_the_attitude():
+    """DEBUG_VECT "SWBODY" carries the sensor's two ADC counts; the node calibrates them and
+    turns them into the world-frame swing with the vehicle's attitude. Closed form: pitched
+    by θ with the cable at β in the body x-z plane, the world angle North is β + θ."""
+    from swingrt.errors import ConfigError
+    from swingrt.mavlink.offboard import Telemetry
+
+    mav = mavlink.MAVLink(None)
+    sensor = {"zero": [2000.0, 2100.0], "gain": [2200.0, 2500.0]}
+    tel = Telemetry(body=sensor)
+    theta, beta = 0.05, 0.1
+    q = (math.cos(theta / 2), 0.0, math.sin(theta / 2), 0.0)
+    tel.update(mav.attitude_quaternion_encode(1, *q, 0.0, 0.0, 0.0), 0.0)
+    counts = (2000.0 + 2200.0 * beta, 2100.0)
+    tel.update(mav.debug_vect_encode(b"SWBODY", 10, *counts, 0.0), 0.1)
+    assert tel.swing == pytest.approx([beta + theta, 0.0], abs=1e-9)
+    assert tel.t_swing == 0.1
+    # A world-frame sensor's message is not what this node flies on, and absurd counts drop.
+    tel.update(mav.debug_vect_encode(b"SWING", 20, 0.3, 0.3, 0.0), 0.2)
+    tel.update(mav.debug_vect_encode(b"SWBODY", 30, 1e12, 0.0, 0.0), 0.3)
+    assert tel.swing == pytest.approx([beta + theta, 0.0], abs=1e-9)
+    assert "absurd" in tel.rejected["DEBUG_VECT"]
+    with pytest.raises(ConfigError, match="gains"):
+        Telemetry(body={"gains": [1.0, 1.0]})
+
+
+def test_fly_on_the_cable_sensor_on_the_airframe_over_mavlink(tmp_path):
+    """The thesis's rig over MAVLink: ``swingrt sitl`` with the cable sensor on the airframe
+    sends its counts as DEBUG_VECT "SWBODY" (and the truth as "SWTRUE"); ``swingrt fly`` on
+    a model identified on that sensor reads the model's sensor settings, composes the counts
+    with the attitude, and flies: the composed swing is the true one within the ADC's step,
+    and the true swing stays well under PX4 PID's."""
+    from swingrt.io.flight import Trace
+    from swingrt.sim import simulate
+
+    body = tmp_path / "body.toml"
+    body.write_text('[sensors]\nswing = "body"\n')
+    train, model = tmp_path / "train.parquet", tmp_path / "model.json"
+    for args, dest in (
+        (["collect", str(body), "--duration", "240"], train),
+        (["identify", str(train)], model),
+    ):
+        subprocess.run(
+            [sys.executable, "-m", "swingrt", *args, "-o", str(dest)],
+            check=True, timeout=120, capture_output=True,
+        )  # fmt: skip
+    url = f"udp:127.0.0.1:{free_port()}"
+    sitl = subprocess.Popen(
+        [sys.executable, "-m", "swingrt", "sitl", str(body), "--listen", url],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    try:
+        conn = observer(url)
+        names = set()
+        deadline = time.monotonic() + 3.0
+        while time.monotonic() < deadline and len(names) < 2:
+            dv = fresh(conn, "DEBUG_VECT", timeout=1.0)
+            if dv is not None:
+                name = dv.name if isinstance(dv.name, str) else dv.name.decode("ascii")
+                names.add(name.rstrip("\0"))
+        conn.close()
+        res = subprocess.run(
+            [sys.executable, "-m", "swingrt", "fly", "--connect", url, "--model", str(model),
+             "--log", str(tmp_path / "fly.parquet")],
+            timeout=90, capture_output=True, text=True,
+        )  # fmt: skip
+    finally:
+        out = stop(sitl, signal.SIGINT)
+    assert res.returncode == 0, res.stdout + res.stderr + out
+    assert names == {"SWBODY", "SWTRUE"}, names
+    node = Trace.from_parquet(tmp_path / "fly.parquet")
+    assert node.meta["swing_source"] == "body"
+    composed, truth = np.asarray(node["swing_n"]), np.asarray(node["swing_true_n"])
+    ok = np.isfinite(composed) & np.isfinite(truth)
+    # One ADC count is 1/2400 rad; the sensor's noise and the attitude's lag add a little.
+    assert np.degrees(np.median(np.abs(composed[ok] - truth[ok]))) < 0.2
+    assert np.corrcoef(composed[ok], truth[ok])[0, 1] > 0.99
+    pid = simulate(str(body), duration=14.0)
     assert np.abs(truth).max() < 0.5 * np.abs(np.asarray(pid["swing_true_n"])).max()
 
 

@@ -115,3 +115,42 @@ def test_methods_spec_errors_name_the_method_field():
     bad = {**METHODS_STUDY, "base": {**METHODS_STUDY["base"], "deepc": {"lambda_gg": 1.0}}}
     with pytest.raises(ConfigError, match="deepc.lambda_gg"):
         check_spec(parse_spec(bad))
+
+
+def test_a_flight_logged_without_the_swing_rate_trains_on_the_nodes_difference():
+    # A PX4 ULog logs the angle only; the methods read the rate the node computes in flight,
+    # the backward difference over one tick. Against the simulator's own rate on a 300 s
+    # flight it agrees to the difference's half-tick lag.
+    import numpy as np
+
+    import swingrt
+    from swingrt.methods import _columns
+
+    flight = swingrt.collect(None, duration=120.0, seed=2)
+    cols = {k: v for k, v in flight.columns.items() if not k.startswith("swing_rate")}
+    dt = 0.03
+    got = _columns(Trace(cols), dt, ["vn", "swing_n", "swing_rate_n"])
+    want = _columns(flight, dt, ["swing_rate_n"])["swing_rate_n"]
+    assert np.corrcoef(got["swing_rate_n"][1:], want[1:])[0, 1] > 0.99
+    np.testing.assert_allclose(
+        got["swing_rate_n"][1:], np.diff(got["swing_n"]) / dt, rtol=0, atol=1e-12
+    )
+
+
+def test_px4s_normalised_thrust_becomes_newtons_through_the_vehicles_motors():
+    # At PX4's hover command the motors carry vehicle and payload: thrust = total mass * g.
+    import numpy as np
+
+    from swingrt.sysid import with_thrust
+
+    for airframe in ("honeybee", "x500"):
+        sc = resolve({"vehicle": {"airframe": airframe}}, default="hover")
+        d = sc.to_dict()
+        total = d["vehicle"]["mass"] + d["payload"]["mass"]
+        hover = sc.hover_thrust()
+        data = Trace({"t": [0.0, 0.1, 0.2], "thrust_sp": [hover, hover, np.nan]})
+        out = with_thrust(data, sc)
+        assert out["thrust"][:2] == pytest.approx([total * _core.GRAVITY] * 2, rel=1e-9)
+        assert np.isnan(out["thrust"][2]) and "thrust" not in data.columns
+        # A flight that has Newtons already is left as it is.
+        assert with_thrust(out, sc) is out

@@ -117,8 +117,9 @@ def test_identify_search_works_on_a_log_without_thrust(real_logs, cli):
 
 
 def test_identify_search_works_on_a_ulog_with_its_swing_calibration(real_logs, cli):
-    """A ULog's thrust is normalised (not newtons): the estimate fails, the check says why
-    and uses the default mass; the swing calibration comes from the CLI."""
+    """A ULog's thrust is normalised (not newtons): without the vehicle's description the
+    check says why it has no payload mass and uses the default; the swing calibration comes
+    from the CLI."""
     out = real_logs / "ulg.json"
     r = cli(
         "identify", real_logs / "flight.ulg", "--search", "--ulog-swing-scale", "0.5",
@@ -126,7 +127,7 @@ def test_identify_search_works_on_a_ulog_with_its_swing_calibration(real_logs, c
     )  # fmt: skip
     assert r.returncode == 0, r.stderr
     d = swingrt.LinearModel.load(out).diagnostics
-    assert "thrust estimate failed" in d["control_check"]["plant"]
+    assert "PX4's normalised setpoint, not newtons" in d["control_check"]["plant"]
     assert d["test_nmae"] < 0.05
     # The calibration matters: read raw, the swing is 2x off and offset.
     r = cli("identify", real_logs / "flight.ulg", "--ulog-swing-topic", "nope", "-o", out)

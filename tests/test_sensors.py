@@ -68,9 +68,12 @@ def test_run_swing_source_is_checked_in_one_line(cli):
     assert "--swing-source" in r.stderr and "'cable'" in r.stderr
     r = cli("run", "--px4", "nowhere", "--swing-source", "body")
     assert r.returncode == 2
+    assert r.stderr.strip().splitlines() == ["swingrt: error: --px4: nowhere is not a folder"]
+    r = cli("run", "--methods", "pid,deepc")
+    assert r.returncode == 2
     assert r.stderr.strip().splitlines() == [
-        "swingrt: error: --swing-source body: the cable sensor on the airframe is not flown "
-        "on PX4 SITL yet (sensor or imu are; body runs on the built-in simulator)"
+        "swingrt: error: --methods: unknown pid (one of shaper, shaper_zv, payload_p, deepc, "
+        "sindy_mpc, nmpc, havokc_mpc, or all)"
     ]
 
 
@@ -181,6 +184,29 @@ def test_a_ulog_with_the_cable_sensor_on_adc_channels_loads_into_the_simulators_
     assert r.returncode == 0, r.stderr
     model = swingrt.LinearModel.load(tmp_path / "m.json")
     assert model.diagnostics["swing_source"] == "body"
+
+
+def test_a_ulog_with_the_cable_sensors_counts_sent_over_mavlink_reads_as_its_adc(tmp_path):
+    """``swingrt hil`` sends the cable sensor's counts to PX4 as DEBUG_VECT "SWBODY", which
+    PX4 logs as ``debug_vect``: a ULog holding only those rows (no world-frame "SWING") loads,
+    without being told, into the world-frame angles the simulator logged, says its source and
+    sensor, and a model identified on it flies with that sensor."""
+    from swingrt.io import load_flight
+    from swingrt.sysid import model_body_sensor
+    from swingrt.testing import write_ulog
+
+    sensor = {"gain": [2200.0, 2500.0], "zero": [2000.0, 2100.0]}
+    flight = swingrt.collect({"sensors": {"swing": "body", "body": sensor}}, duration=200.0, seed=4)
+    path = tmp_path / "hil.ulg"
+    write_ulog(flight.columns, path, body_vect=True)
+    data = load_flight(path, body=sensor)
+    assert data.meta["swing_source"] == "body" and data.meta["body_sensor"] == sensor
+    t = np.asarray(data["t"]) + float(flight.t[0])
+    err = np.asarray(data["swing_n"]) - np.interp(t, flight.t, flight["swing_n"])
+    # The counts are rows of the log's own rate (40 Hz), held between rows.
+    assert np.degrees(np.median(np.abs(err))) < 0.1, np.degrees(np.median(np.abs(err)))
+    model = swingrt.sysid.identify(data, delays=10, rank=12)
+    assert model_body_sensor(model) == sensor
 
 
 def test_the_imu_swings_scale_is_measured_from_the_flight_not_assumed_from_a_mass():

@@ -49,6 +49,9 @@ __all__ = [
     "identify",
     "identify_settings",
     "imu_swing_scale",
+    "body_sensor",
+    "model_body_sensor",
+    "with_thrust",
     "model_estimator",
     "resample",
     "search",
@@ -295,6 +298,35 @@ def swing_estimator(data: Any) -> dict[str, Any] | None:
     return None if est is None else dict(est)
 
 
+def body_sensor(data: Any) -> dict[str, Any] | None:
+    """The settings of the cable sensor on the airframe that made a flight's swing columns:
+    a log's (``meta["body_sensor"]``: a ULog read from its ADC or a node's log) or the
+    simulated flight's scenario's (``sensors.body``); None when the flight does not say."""
+    meta = getattr(data, "meta", None) or {}
+    if meta.get("body_sensor") is not None:
+        return dict(meta["body_sensor"])
+    sensors = (meta.get("scenario") or {}).get("sensors") or {}
+    body = sensors.get("body")
+    return None if body is None else dict(body)
+
+
+def model_body_sensor(model: LinearModel) -> dict[str, Any] | None:
+    """The cable sensor on the airframe a flight on ``model`` reads: its settings when the
+    model's swing came from one (the counts must be calibrated and composed alike), else
+    None. A model on the body sensor that does not say with which settings raises
+    ``ModelError``."""
+    d = model.diagnostics
+    if d.get("swing_source") != "body":
+        return None
+    body = d.get("body_sensor")
+    if not isinstance(body, dict):
+        raise ModelError(
+            "the model was identified on a cable sensor on the airframe but does not say "
+            "with which settings (diagnostics.body_sensor)"
+        )
+    return dict(body)
+
+
 def model_estimator(model: LinearModel) -> dict[str, Any] | None:
     """The swing estimator a flight on ``model`` must run: the settings it was identified
     with when its swing is the IMU's estimate (its swing output is that estimate: another
@@ -323,6 +355,8 @@ def _with_source(model: LinearModel, data: Any) -> LinearModel:
     if source == "imu":
         extra["swing_estimator"] = swing_estimator(data)
         extra["swing_scale"] = imu_swing_scale(data)["diagnostics"]
+    if source == "body":
+        extra["body_sensor"] = body_sensor(data)
     return model.with_diagnostics(extra)
 
 
@@ -536,6 +570,11 @@ def check_plant(
                 source = f"payload mass {mass:.3g} kg from thrust"
             except (DataError, IdentificationError) as exc:
                 why = f"the thrust estimate failed ({exc})"
+        elif "thrust_sp" in cols:
+            why = (
+                "the log's thrust is PX4's normalised setpoint, not newtons (the vehicle's "
+                "description, --twin vehicle.toml / sysid.with_thrust, gives its motors)"
+            )
         else:
             why = "the log has no 'thrust' column"
         if why is not None:
@@ -563,6 +602,29 @@ def check_plant(
             f"no white-box: {exc})"
         )
     return plant, f"whitebox({source}; {length})"
+
+
+def with_thrust(data: Any, vehicle: Any) -> Any:
+    """``data`` (a Trace) with ``thrust`` [N] from PX4's normalised collective thrust
+    ``thrust_sp`` (a ULog's) through ``vehicle``'s motors (a scenario: four times eq. 6.1's
+    thrust at the command, :meth:`Scenario.mass_hovering_at` · g); the white-box's
+    payload-mass estimate reads it. Unchanged when it has ``thrust`` already."""
+    cols = _columns(data)
+    if "thrust" in cols or "thrust_sp" not in cols:
+        return data
+    cmd = np.clip(np.asarray(cols["thrust_sp"], dtype=float), 0.0, 1.0)
+    newtons = np.array([vehicle.mass_hovering_at(float(c)) for c in cmd]) * _core.GRAVITY
+    from swingrt.io.flight import Trace
+
+    thrust = np.where(np.isfinite(cols["thrust_sp"]), newtons, np.nan)
+    if isinstance(data, Trace):
+        return Trace(
+            {**data.columns, "thrust": thrust},
+            data.meta,
+            source=data.source,
+            notes={k: v for k, v in data.notes.items() if k != "thrust"},
+        )
+    return {**cols, "thrust": thrust}
 
 
 def estimate_payload_mass(

@@ -87,12 +87,15 @@ def write_ulog(
     swing_scale: float = 1.0,
     swing_offset: float = 0.0,
     adc_channels: tuple[int, int] | None = None,
+    body_vect: bool = False,
 ) -> None:
     """Write a trace as a PX4 ULog with the topics :func:`load_flight` reads.
 
     With ``adc_channels`` (the thesis's rig: a cable sensor on the airframe) the swing is
     written as the trace's ``adc_x adc_y`` counts on those channel ids of ``adc_report``
-    (12 slots, the flight controller's own channels beside them) instead of a DEBUG_VECT.
+    (12 slots, the flight controller's own channels beside them) instead of a DEBUG_VECT;
+    with ``body_vect`` the counts are written as DEBUG_VECT rows named ``SWBODY`` (the
+    sensor's counts sent to PX4 over MAVLink, as ``swingrt hil`` sends them).
 
     Topics: ``vehicle_local_position`` (x, y, z, vx, vy, vz), ``vehicle_local_position_setpoint``
     (vx, vy, vz and ``acceleration[3]``, or ``acc_x/acc_y/acc_z`` with ``old_spelling``),
@@ -109,7 +112,8 @@ def write_ulog(
     }
     rates.update(rates_hz or {})
     rates.setdefault("adc_report", 100.0)
-    swing_cols = ["adc_x", "adc_y"] if adc_channels is not None else ["swing_n", "swing_e"]
+    on_adc = adc_channels is not None or body_vect
+    swing_cols = ["adc_x", "adc_y"] if on_adc else ["swing_n", "swing_e"]
     need = ["t", "pn", "pe", "pd", "vn", "ve", "vd", "roll", "pitch", "yaw", *swing_cols]
     need += ["acc_sp_n", "acc_sp_e", "acc_sp_d"]
     require(trace_columns, need, "write_ulog")
@@ -190,7 +194,15 @@ def write_ulog(
         (int(u), "vehicle_attitude", [int(u)] + [float(c[i]) for c in q]) for i, u in enumerate(us)
     ]
 
-    if adc_channels is None:
+    if body_vect:
+        ts, us = sample(rates["debug_vect"])
+        k = np.clip(np.searchsorted(t, ts + 1e-12, side="right") - 1, 0, len(t) - 1)
+        cx, cy = col("adc_x")[k], col("adc_y")[k]
+        rows += [
+            (int(u), "debug_vect", [int(u), b"SWBODY", float(cx[i]), float(cy[i]), 0.0])
+            for i, u in enumerate(us)
+        ]
+    elif adc_channels is None:
         ts, us = sample(rates["debug_vect"])
         sn = (np.interp(ts, t, col("swing_n")) - swing_offset) / swing_scale
         se = (np.interp(ts, t, col("swing_e")) - swing_offset) / swing_scale

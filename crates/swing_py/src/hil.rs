@@ -58,8 +58,9 @@ impl PyHilPlant {
     }
 
     /// The sensor readings of the current step as a dict in HIL_SENSOR / HIL_GPS units
-    /// (`gps` is None when no fix is due), with the swing sensor and the ground truth (the
-    /// true swing of the first link N, E [rad] as `swing_true`).
+    /// (`gps` is None when no fix is due), with the swing sensor, the body cable sensor's ADC
+    /// counts (`adc`, NaN unless the swing source is `body`) and the ground truth (the true
+    /// swing of the first link N, E [rad] as `swing_true`).
     fn sensors<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let f = self.inner.sensors();
         let d = PyDict::new(py);
@@ -72,6 +73,7 @@ impl PyHilPlant {
         d.set_item("temperature", f.temperature)?;
         d.set_item("fields_updated", f.fields_updated)?;
         d.set_item("swing", f.swing)?;
+        d.set_item("adc", f.adc)?;
         let truth = self.inner.true_swing();
         d.set_item("swing_true", [truth[0], truth[1]])?;
         d.set_item("attitude", f.attitude)?;

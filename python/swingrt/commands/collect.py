@@ -58,6 +58,7 @@ def run(args) -> int:
             out=args.output,
             axes=args.axes or "n",
             swing_estimator=dict(sensors["estimator"]) if imu else None,
+            body_sensor=dict(sensors["body"]) if sensors["swing"] == "body" else None,
         )
         return 0
     from swingrt.sim import collect

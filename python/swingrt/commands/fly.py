@@ -99,6 +99,7 @@ def run(args) -> int:
         Watchdog,
         fly,
         load_controller,
+        model_body_sensor,
         model_swing_estimator,
     )
 
@@ -154,6 +155,7 @@ def run(args) -> int:
             telemetry_timeout=args.timeout,
             watchdog=watchdog,
             swing_estimator=model_swing_estimator(args.model),
+            body_sensor=model_body_sensor(args.model),
         )
     finally:
         conn.close()

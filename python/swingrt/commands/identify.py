@@ -136,11 +136,15 @@ def run(args) -> int:
         checked = sysid.identify_settings(**settings)
     ulog_swing = _ulog_swing(args)
     body = None
-    on_adc = (ulog_swing or {}).get("topic") == "adc_report"
-    if on_adc and twin is not None and args.twin != "builtin":
-        # The cable sensor on the airframe is part of the vehicle's description.
-        body = twin.to_dict()["sensors"]["body"]
+    described = twin if args.twin not in ("none", "builtin") else None
+    if described is not None and str(args.data).endswith(".ulg"):
+        # The cable sensor on the airframe is part of the vehicle's description (read from
+        # adc_report or from "SWBODY" rows).
+        body = described.to_dict()["sensors"]["body"]
     data = load_flight(args.data, ulog_swing=ulog_swing, body=body)
+    if described is not None:
+        # PX4 logs its thrust normalised: the described vehicle's motors make it Newtons.
+        data = sysid.with_thrust(data, described)
     result = None
     if args.search:
         search_opts = {k: v for k, v in checked.items() if k not in ("delays", "rank")}

@@ -42,6 +42,12 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "x500 (PX4's reference quadrotor of its SITL)",
     )
     p.add_argument(
+        "--methods",
+        metavar="NAMES",
+        help="also fly these of the field's methods (comma-separated: shaper, shaper_zv, "
+        "payload_p, deepc, sindy_mpc, nmpc, havokc_mpc; `all`), trained on the same flight",
+    )
+    p.add_argument(
         "--no-twin",
         action="store_true",
         help="with --px4: select the model without flying it first on the vehicle PX4's "
@@ -65,15 +71,9 @@ def run(args) -> int:
 
     from swingrt.experiments import Experiment, run_experiment
 
+    methods = _methods(args.methods)
     if args.px4:
-        from swingrt.errors import ConfigError
         from swingrt.hil.pipeline import run_on_px4
-
-        if args.swing_source == "body":
-            raise ConfigError(
-                "--swing-source body: the cable sensor on the airframe is not flown on PX4 "
-                "SITL yet (sensor or imu are; body runs on the built-in simulator)"
-            )
 
         rows = run_on_px4(
             args.px4,
@@ -85,6 +85,7 @@ def run(args) -> int:
             twin=not args.no_twin,
             swing_source=args.swing_source,
             airframe=args.airframe,
+            methods=methods,
         )
         print((Path(args.out) / "metrics.md").read_text(encoding="utf-8"))
         by = {r["controller"]: r for r in rows}
@@ -106,6 +107,7 @@ def run(args) -> int:
         "t = 2 s after a 300 s random-step training flight (thesis table 4.1); swing source "
         f"{args.swing_source}.",
         duration=30.0,
+        controllers=["pid", "lqr", "mpc", *methods],
         common={"sensors": {"swing": args.swing_source}, "vehicle": {"airframe": args.airframe}},
     )
     rows = run_experiment(exp, args.out, seed=args.seed, quiet=args.quiet)
@@ -130,3 +132,21 @@ def run(args) -> int:
     print(f"vehicle: {args.airframe}; swing source: {args.swing_source} (every flight)")
     print(f"report: {out}/ (metrics.csv, metrics.md, figures, traces, model)")
     return 0
+
+
+def _methods(names: str | None) -> list[str]:
+    """The ``--methods`` list (``all``: every method), each name checked."""
+    from swingrt.errors import ConfigError
+    from swingrt.methods import METHODS
+
+    if not names:
+        return []
+    picked = list(METHODS) if names.strip() == "all" else [n.strip() for n in names.split(",")]
+    unknown = [n for n in picked if n not in METHODS]
+    if unknown or not picked:
+        raise ConfigError(
+            f"--methods: unknown {', '.join(unknown) or '(none given)'} "
+            f"(one of {', '.join(METHODS)}, or all)",
+            field="methods",
+        )
+    return picked

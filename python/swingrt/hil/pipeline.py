@@ -21,6 +21,7 @@ import shutil
 import sys
 import time
 import tomllib
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -60,6 +61,7 @@ def run_on_px4(
     twin: bool = True,
     swing_source: str = "sensor",
     airframe: str = "honeybee",
+    methods: Sequence[str] = (),
 ) -> list[dict[str, Any]]:
     """Run the whole comparison on PX4 (module doc); returns the metrics rows. With
     ``twin`` the model selection flies each candidate first on the vehicle PX4's
@@ -68,8 +70,12 @@ def run_on_px4(
     the log of. ``swing_source = "imu"``: no sensor on the cable (the simulator sends PX4 no
     swing); the model is identified on the swing estimated from PX4's own IMU in its ULog,
     and every flight's node estimates it the same way from HIGHRES_IMU; the metrics read
-    the simulator's true swing. ``airframe``: the built-in vehicle swingrt's physics flies
-    under PX4 (its geometry, gains and hover thrust written to PX4's parameters)."""
+    the simulator's true swing (every flight is judged on the physics trace's true swing,
+    whatever its controller measured). ``airframe``: the built-in vehicle swingrt's physics flies
+    under PX4 (its geometry, gains and hover thrust written to PX4's parameters).
+    ``methods``: controllers of :mod:`swingrt.methods` trained on the same ULog and flown by
+    the offboard node after the MPC in the same PX4 session (a method whose flight the node
+    aborts, e.g. a tick over its period, gets a row that says why)."""
     from swingrt import sysid
     from swingrt.experiments.schema import Experiment
     from swingrt.hil.session import HilSession
@@ -80,6 +86,7 @@ def run_on_px4(
         Watchdog,
         fly,
         load_controller,
+        model_body_sensor,
         model_swing_estimator,
     )
     from swingrt.mavlink.training import collect_over_mavlink, fly_velocity_mission
@@ -90,33 +97,45 @@ def run_on_px4(
 
     if not (30.0 <= training < 86_400.0):
         raise ConfigError(f"--training must be 30 s or more, not {training}", field="training")
-    if swing_source not in ("sensor", "imu"):
+    if swing_source not in ("sensor", "body", "imu"):
         raise ConfigError(
-            f"--swing-source: PX4 SITL flies 'sensor' or 'imu', not {swing_source!r}",
+            f"--swing-source: PX4 SITL flies 'sensor', 'body' or 'imu', not {swing_source!r}",
             field="swing_source",
+        )
+    from swingrt.hil.px4 import check_px4_dir
+    from swingrt.methods import METHODS
+
+    check_px4_dir(px4_dir)
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown:
+        raise ConfigError(
+            f"--methods: unknown {', '.join(unknown)} (one of {', '.join(METHODS)})",
+            field="methods",
         )
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     node: dict[str, Any] = {}
-    estimator = None
-    if swing_source == "imu" or airframe != "honeybee":
+    estimator = body = None
+    if swing_source != "sensor" or airframe != "honeybee":
         if scenario is not None:
             raise ConfigError(
-                "--swing-source imu and --airframe: the built-in scenario only", field="scenario"
+                "--swing-source and --airframe: the built-in scenario only", field="scenario"
             )
         from swingrt.io.atomic import write_text_atomic
         from swingrt.scenario import resolve
 
         scenario = out / "scenario.toml"
-        text = f'[vehicle]\nairframe = "{airframe}"\n'
-        if swing_source == "imu":
-            text += '\n[sensors]\nswing = "imu"\n'
-        resolved = resolve(tomllib.loads(text), default="hover")  # a bad name stops here
+        text = f'[vehicle]\nairframe = "{airframe}"\n\n[sensors]\nswing = "{swing_source}"\n'
+        sensors = resolve(tomllib.loads(text), default="hover").to_dict()["sensors"]
         write_text_atomic(scenario, text)
         if swing_source == "imu":
-            estimator = resolved.to_dict()["sensors"]["estimator"]
+            estimator = sensors["estimator"]
             # Every flight's node estimates the swing from HIGHRES_IMU as the model expects.
             node["swing_estimator"] = estimator
+        if swing_source == "body":
+            # The cable sensor's counts reach PX4 (its log) and the node as DEBUG_VECT SWBODY.
+            body = sensors["body"]
+            node["body_sensor"] = body
     case = "default-step"
     echo = None if quiet else (lambda line: print(line, file=sys.stderr, flush=True))
 
@@ -146,7 +165,7 @@ def run_on_px4(
 
     # 2. identification from PX4's own log
     _say(quiet, f"[ identification ] from PX4's ULog {ulog.name}")
-    data = load_flight(ulog, estimator=estimator)
+    data = load_flight(ulog, estimator=estimator, body=body)
     data.to_parquet(out / f"{case}__training.parquet")
     result = sysid.search(data)
     twin_sc = None
@@ -165,6 +184,7 @@ def run_on_px4(
     model.save(out / f"{case}__model.json")
     plot_pareto(result, out / f"{case}__error_vs_delays.png")
     controller, ts, axes = load_controller(out / f"{case}__model.json")
+    trained = _train_methods(methods, data, model, scenario, twin_sc, summaries, quiet)
 
     # 3. PID (PX4's velocity control) and MPC on the same step, one PX4 session
     mission = Mission(list(STEP_MISSION), STEP_DURATION)
@@ -199,13 +219,28 @@ def run_on_px4(
                 log_path=path,
                 watchdog=Watchdog(ts, swing_limit=math.radians(30.0)),
                 swing_estimator=model_swing_estimator(out / f"{case}__model.json"),
+                body_sensor=model_body_sensor(out / f"{case}__model.json"),
             )
         finally:
             conn.close()
         traces["mpc"] = Trace.from_parquet(path)
+        aborted: dict[str, str] = {}
+        for name, t in trained.items():
+            time.sleep(SETTLE_S)
+            _say(quiet, f"[ px4 ] {name}: trained on PX4's log, flown by the offboard node")
+            path = out / f"{case}__{name}.parquet"
+            why = _fly_method(hil.onboard_url, t, mission, path, node)
+            if why is not None:
+                aborted[name] = why
+                summaries.append(f"{name}: the node aborted the flight ({why})")
+            if path.exists():
+                traces[name] = Trace.from_parquet(path)
     for p in hil.ulogs[-1:]:
         shutil.copyfile(p, out / "px4_flights.ulg")
     summaries.append(f"flight session: {hil.summary}")
+    physics = Trace.from_parquet(out / f"{case}__flights_physics.parquet")
+    for tr in traces.values():
+        _judge_on_truth(tr, physics)
 
     # 4. report
     rows = []
@@ -233,8 +268,90 @@ def run_on_px4(
         name="px4-default-step",
         description="PX4 SITL in the loop with swingrt's physics: 0.2 kg on 1 m, 2 m/s North "
         "step at t = 2 s after a random-step training flight flown by PX4's velocity control.",
-        controllers=["pid", "mpc"],
+        controllers=["pid", "mpc", *trained],
     )
     write_metrics(out, exp, rows, notes)
     plot_case(out / f"{case}.png", case, traces, "n")
     return rows
+
+
+def _train_methods(methods, data, model, scenario, twin_sc, summaries, quiet) -> dict[str, Any]:
+    """Train each of ``methods`` on PX4's training log as the campaigns do
+    (:func:`swingrt.methods.train`): the DMDc model, the white-box estimate with the vehicle
+    mass of its description (the scenario's), PX4's gains from the twin read from PX4's
+    ULog (else the scenario's) and the twin for HAVOKc's selection."""
+    if not methods:
+        return {}
+    from swingrt import sysid
+    from swingrt.errors import DataError, IdentificationError
+    from swingrt.methods import needs_whitebox
+    from swingrt.methods import train as train_method
+    from swingrt.scenario import resolve
+
+    _say(quiet, f"[ identification ] methods {', '.join(methods)} from PX4's ULog")
+    vehicle = resolve(scenario, default="hover")
+    described = vehicle.to_dict()
+    lqr = None
+    try:
+        # PX4 logs its thrust normalised; the vehicle's motors make it Newtons.
+        wb = sysid.identify(
+            sysid.with_thrust(data, vehicle),
+            method="whitebox",
+            vehicle_mass=float(described["vehicle"]["mass"]),
+        )
+        lqr = sysid.lqr_parameters(wb)
+    except (DataError, IdentificationError) as exc:
+        summaries.append(f"white-box not estimated ({exc}): methods that need it not flown")
+    px4 = (twin_sc.to_dict() if twin_sc is not None else described)["controller"]
+    trained = {}
+    for name in methods:
+        if lqr is None and needs_whitebox(name):
+            continue
+        t = train_method(name, data, model=model, whitebox=lqr, px4=px4, twin=twin_sc)
+        summaries.append(
+            f"{name}: trained in {t.ident_seconds:.2f} s on {t.training_seconds:.0f} s of flight"
+        )
+        trained[name] = t
+    return trained
+
+
+def _fly_method(url: str, trained, mission, path, node: dict[str, Any]) -> str | None:
+    """Fly one trained method by the offboard node; the reason when the node aborted."""
+    from swingrt.errors import FlightAbort
+    from swingrt.mavlink.link import connect
+    from swingrt.mavlink.offboard import Watchdog, fly
+    from swingrt.methods import controller
+
+    ctrl = controller(trained)
+    conn = connect(url)
+    try:
+        fly(
+            conn,
+            ctrl,
+            ts=float(ctrl.period),
+            axes=int(ctrl.axes),
+            mission=mission,
+            log_path=path,
+            watchdog=Watchdog(float(ctrl.period), swing_limit=math.radians(30.0)),
+            **node,
+        )
+    except FlightAbort as exc:
+        return str(exc)
+    finally:
+        conn.close()
+    return None
+
+
+def _judge_on_truth(node: Any, physics: Any) -> None:
+    """Put the simulator's true swing into a node log's ``swing_true_*`` (what the metrics
+    read), from the physics trace at the node's PX4 time (PX4's clock is the physics'
+    clock under ``swingrt hil``): every flight is judged on the payload's own swing, not on
+    what its controller measured (a cable sensor on the airframe composed with PX4's
+    attitude estimate carries the estimate's error, about 1° here)."""
+    import numpy as np
+
+    at = np.asarray(node["px4_time_s"], dtype=float)
+    t = np.asarray(physics["t"], dtype=float)
+    for a in ("n", "e"):
+        truth = np.interp(at, t, np.asarray(physics[f"swing_true_{a}"], dtype=float))
+        node[f"swing_true_{a}"] = np.where(np.isfinite(at), truth, np.nan)

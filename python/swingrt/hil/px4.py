@@ -18,7 +18,7 @@ from pathlib import Path
 
 from swingrt.errors import ConfigError, LinkError
 
-__all__ = ["Px4Sitl", "SIM_PORT", "GCS_PORT", "ONBOARD_PORT"]
+__all__ = ["Px4Sitl", "SIM_PORT", "GCS_PORT", "ONBOARD_PORT", "check_px4_dir"]
 
 #: Base ports of PX4 SITL (each instance N adds N).
 SIM_PORT = 4560
@@ -29,6 +29,24 @@ ONBOARD_PORT = 14540
 
 #: airframe of a generic quad with the simulator interface.
 HIL_AIRFRAME = 10016
+
+
+def check_px4_dir(px4_dir) -> Path:
+    """``px4_dir`` as a folder PX4 SITL starts from (a ``px4_sitl`` build folder with
+    ``bin/px4`` and ``etc/``, or a folder with a ``run-px4`` launcher); ConfigError naming
+    ``--px4`` otherwise, before anything starts."""
+    root = Path(px4_dir).expanduser()
+    if not root.is_dir():
+        raise ConfigError(f"--px4: {root} is not a folder", field="px4")
+    if not (root / "run-px4").is_file() and not (
+        (root / "bin" / "px4").is_file() and (root / "etc").is_dir()
+    ):
+        raise ConfigError(
+            f"--px4: {root} is neither a PX4 SITL build folder (bin/px4 and etc/) nor a "
+            "folder with a run-px4 launcher",
+            field="px4",
+        )
+    return root
 
 
 class Px4Sitl:
@@ -42,22 +60,14 @@ class Px4Sitl:
         params: dict | None = None,
         workdir=None,
     ):
-        root = Path(px4_dir).expanduser()
-        if not root.is_dir():
-            raise ConfigError(f"--px4: {root} is not a folder", field="px4")
+        root = check_px4_dir(px4_dir)
         self._launcher: list[str] | None
         if (root / "run-px4").is_file():
             self._launcher = [str(root / "run-px4"), "--airframe", "hil"]
             self._env_params = False
-        elif (root / "bin" / "px4").is_file() and (root / "etc").is_dir():
+        else:
             self._launcher = None
             self._env_params = True
-        else:
-            raise ConfigError(
-                f"--px4: {root} is neither a PX4 SITL build folder (bin/px4 and etc/) nor a "
-                "folder with a run-px4 launcher",
-                field="px4",
-            )
         if not (0 <= instance <= 100):
             raise ConfigError(f"--instance must be 0..100, not {instance}", field="instance")
         self.root = root

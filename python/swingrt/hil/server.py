@@ -32,6 +32,7 @@ from swingrt._core import GRAVITY
 from swingrt.errors import FlightAbort, LinkError
 from swingrt.io.flight import Trace
 from swingrt.mavlink.link import (
+    BODY_NAME,
     PX4_MAIN_MODE,
     PX4_SUB_MODE_AUTO,
     SWING_NAME,
@@ -177,7 +178,15 @@ class HilServer:
             )  # fmt: skip
         if k % self.swing_every == 0:
             sn, se = f["swing"]
-            if math.isfinite(sn) and math.isfinite(se):
+            cx, cy = f["adc"]
+            if math.isfinite(cx) and math.isfinite(cy):
+                # A cable sensor on the airframe: its raw counts, as the flight controller's
+                # ADC reads them (calibrated and composed with the attitude by the reader).
+                # Alone: PX4 keeps the newest debug_vect and streams that, so a truth sent
+                # beside it would hide it (the truth is in the physics log).
+                self.gcs.mav.debug_vect_send(BODY_NAME.encode(), t, cx, cy, 0.0)
+                self.report.swing_messages += 1
+            elif math.isfinite(sn) and math.isfinite(se):
                 self.gcs.mav.debug_vect_send(SWING_NAME.encode(), t, sn, se, 0.0)
                 self.report.swing_messages += 1
             else:

@@ -7,7 +7,7 @@ PX4 ULog mapping (uORB topics, timestamps in microseconds):
 ``vehicle_local_position_setpoint``         ``acc_sp_*`` <- ``acceleration[0..2]`` (PX4 >= 1.11)
                                             or ``acc_x acc_y acc_z`` (older firmware);
                                             ``vel_sp_*`` <- ``vx vy vz``;
-                                            ``thrust`` <- ``|thrust[0..2]|`` (normalised)
+                                            ``thrust_sp`` <- ``|thrust[0..2]|`` (normalised)
 ``vehicle_attitude``                        ``roll pitch yaw`` <- ``q[0..3]`` (scalar first,
                                             body FRD -> NED), Euler ZYX
 ``sensor_combined``                         ``imu_ax imu_ay imu_az`` <- ``accelerometer_m_s2[0..2]``
@@ -258,7 +258,9 @@ def _trace_from_ulog(
                 notes[c] = f"vehicle_local_position_setpoint has no field {f}"
         if all(f"thrust[{i}]" in fsp for i in range(3)):
             th = np.stack([fsp[f"thrust[{i}]"].astype(float) for i in range(3)])
-            cols["thrust"] = np.sqrt((th * th).sum(axis=0))
+            # PX4's normalised collective thrust, not Newtons: `sysid.with_thrust` turns it
+            # into the trace's ``thrust`` [N] with the vehicle's motors.
+            cols["thrust_sp"] = np.sqrt((th * th).sum(axis=0))
         if cols:
             sources.append((t_sp, cols))
 
@@ -312,12 +314,25 @@ def _trace_from_ulog(
                 swing_why = f"{swing['topic']} has no name field to select '{swing['name']}'"
             else:
                 keep = names == swing["name"]
-                if not keep.any():
+                counts = names == BODY_VECT_NAME
+                if not keep.any() and counts.any() and not explicit_swing:
+                    # No world-frame sensor but a cable sensor on the airframe whose counts
+                    # came in over MAVLink (``swingrt hil``): read as its ADC would be.
+                    on_body = True
+                    if att is None:
+                        swing_why = "the cable sensor's body angles need vehicle_attitude"
+                    else:
+                        from swingrt import _core
+
+                        _core.body_swing(np.zeros((0, 2)), np.zeros((0, 4)), dict(body or {}))
+                        adc = {"adc_x": fsw["x"][counts], "adc_y": fsw["y"][counts]}
+                        sources.append((t_sw[counts], {k: v.astype(float) for k, v in adc.items()}))
+                elif not keep.any():
                     swing_why = f"no {swing['topic']} rows named '{swing['name']}' (swing sensor)"
                 else:
                     t_sw = t_sw[keep]
                     fsw = {k: v[keep] for k, v in fsw.items()}
-        if swing_why is None:
+        if swing_why is None and not on_body:
             cols = {}
             for axis in ("n", "e"):
                 field = swing[axis]
@@ -389,6 +404,9 @@ def _trace_from_ulog(
 
 #: The uORB topic of the flight controller's ADC, where a cable sensor on the airframe is read.
 ADC_TOPIC = "adc_report"
+#: ``debug_vect`` rows of a cable sensor on the airframe whose counts reached PX4 over MAVLink
+#: (``swingrt.mavlink.link.BODY_NAME``; ``swingrt.io`` sits below ``swingrt.mavlink``).
+BODY_VECT_NAME = "SWBODY"
 
 
 def _adc_counts(st, body: Mapping | None, sources: list) -> str | None:

@@ -24,8 +24,10 @@ os.environ.setdefault("MAVLINK20", "1")  # must precede pymavlink's dialect load
 from pymavlink import mavutil  # noqa: E402
 
 from swingrt.errors import LinkError  # noqa: E402
+from swingrt.io.ulog import BODY_VECT_NAME  # noqa: E402
 
 __all__ = [
+    "BODY_NAME",
     "SWING_NAME",
     "TRUTH_NAME",
     "mavlink",
@@ -46,6 +48,10 @@ mavlink = mavutil.mavlink
 #: DEBUG_VECT name of the swing sensor's reading (x = N, y = E [rad]), which PX4 publishes,
 #: streams to the offboard computer and logs, and the controller flies on.
 SWING_NAME = "SWING"
+#: DEBUG_VECT name of a cable sensor on the airframe's reading (x, y = its two ADC channels
+#: [counts], thesis 6.1.2): the node calibrates it and composes it with the attitude into the
+#: world-frame swing by the model's sensor settings (:func:`swingrt._core.body_swing`).
+BODY_NAME = BODY_VECT_NAME
 #: DEBUG_VECT name of a simulator's true swing (``swingrt hil`` without a swing sensor): the
 #: offboard node logs it as ``swing_true_*`` for the flight's metrics, never flies on it.
 TRUTH_NAME = "SWTRUE"

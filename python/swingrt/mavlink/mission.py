@@ -293,7 +293,7 @@ def fly_px4_mission(
     for t, seq in session.tel.reached:  # PX4 may repeat a report: the first one counts
         if seq in by_seq and by_seq[seq] not in reported:
             reported[by_seq[seq]] = t - t0
-    _finish(report, log_path)
+    _finish(report, log_path, session.log_meta)
     if len(seqs) - 1 not in reported:
         raise FlightAbort(
             f"PX4's mission {mission.name!r} did not finish within {limit:.0f} s "
@@ -365,7 +365,7 @@ def fly_mission(
 
     report = session.run(policy, time_limit(local), reset=reset, until=lambda: guidance.done)
     events = list(guidance.events())
-    _finish(report, log_path)
+    _finish(report, log_path, session.log_meta)
     if not guidance.done:
         raise FlightAbort(
             f"mission {mission.name!r} not finished within {time_limit(local):.0f} s; "

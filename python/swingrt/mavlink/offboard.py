@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+from swingrt import _core
 from swingrt._core import AdaptiveMpc, ImuSwingEstimator, Mpc, check_settings
 from swingrt.errors import (
     ConfigError,
@@ -55,6 +56,7 @@ from swingrt.errors import (
 )
 from swingrt.io.flight import TRACE_COLUMNS, write_columns
 from swingrt.mavlink.link import (
+    BODY_NAME,
     PX4_MAIN_MODE,
     PX4_SUB_MODE_AUTO,
     SWING_NAME,
@@ -78,6 +80,7 @@ __all__ = [
     "OffboardSession",
     "fly",
     "load_controller",
+    "model_body_sensor",
     "model_swing_estimator",
 ]
 
@@ -180,6 +183,10 @@ TELEMETRY_LIMITS: dict[str, tuple[float, ...]] = {
     "HIGHRES_IMU": (1000.0,),
 }
 
+#: Largest ADC count a cable sensor on the airframe may send (a 24-bit ADC's range, the
+#: most ``[sensors.body] adc_bits`` allows).
+BODY_COUNTS_LIMIT = float(2**24)
+
 #: A time stamp this far back (ms; µs for DEBUG_VECT) is a reboot, not a replay.
 REBOOT_JUMP: dict[str, int] = {
     "LOCAL_POSITION_NED": 10_000,
@@ -199,8 +206,17 @@ class Telemetry:
     ``estimator`` (``_core.ImuSwingEstimator``) the swing is the one it estimates from
     HIGHRES_IMU, not a swing sensor's."""
 
-    def __init__(self, estimator: ImuSwingEstimator | None = None):
+    def __init__(
+        self, estimator: ImuSwingEstimator | None = None, body: dict | None = None
+    ) -> None:
         nan = math.nan
+        if body is not None:
+            # The core checks the settings once (a bad field is named here, not mid-flight).
+            body = dict(body)
+            _core.body_swing(np.zeros((0, 2)), np.zeros((0, 4)), body)
+        #: The cable sensor on the airframe (its ADC and calibration, ``[sensors.body]``):
+        #: the swing is DEBUG_VECT :data:`BODY_NAME`'s counts composed with the attitude.
+        self.body = body
         self.pos = [nan] * 3
         self.vel = [nan] * 3
         self.q = [1.0, 0.0, 0.0, 0.0]
@@ -266,8 +282,13 @@ class Telemetry:
             if isinstance(name, bytes):
                 name = name.decode("ascii", "replace")
             name = name.rstrip("\0")
-            if name == SWING_NAME and self.estimator is None:
+            if name == SWING_NAME and self.estimator is None and self.body is None:
                 self.swing = [msg.x, msg.y]
+                self.t_swing = now
+            elif name == BODY_NAME and self.body is not None:
+                counts = np.array([[msg.x, msg.y]])
+                world = _core.body_swing(counts, np.array([self.q]), self.body)[0]
+                self.swing = [float(world[0]), float(world[1])]
                 self.t_swing = now
             elif name == TRUTH_NAME:
                 self.swing_true = [msg.x, msg.y]
@@ -331,6 +352,8 @@ class Telemetry:
         """Where the swing comes from, for messages."""
         if self.estimator is not None:
             return "HIGHRES_IMU (the swing estimated from the IMU)"
+        if self.body is not None:
+            return f"DEBUG_VECT '{BODY_NAME}' (the cable sensor on the airframe)"
         return f"DEBUG_VECT '{SWING_NAME}' (swing sensor)"
 
     def _check(self, kind: str, msg) -> bool:
@@ -352,6 +375,10 @@ class Telemetry:
             return self._fresh(kind, msg.time_boot_ms)
         if kind == "DEBUG_VECT":
             name = msg.name.decode("ascii", "replace") if isinstance(msg.name, bytes) else msg.name
+            if name.rstrip("\0") == BODY_NAME:
+                return self._sane(kind, (msg.x, msg.y), BODY_COUNTS_LIMIT) and self._fresh(
+                    kind, msg.time_usec
+                )
             if name.rstrip("\0") != SWING_NAME:
                 # The truth is only logged: sane values or NaN, never a freshness record.
                 return name.rstrip("\0") != TRUTH_NAME or self._sane(kind, (msg.x, msg.y), limit[0])
@@ -506,6 +533,7 @@ class OffboardSession:
         telemetry_hz: float = 100.0,
         watchdog: Watchdog | None = None,
         swing_estimator: dict | None = None,
+        body_sensor: dict | None = None,
     ):
         if not (ts > 0 and math.isfinite(ts)):
             raise ConfigError(f"sample time must be positive, not {ts}")
@@ -520,9 +548,18 @@ class OffboardSession:
         self.telemetry_timeout = telemetry_timeout
         self.telemetry_hz = telemetry_hz
         self.watchdog = watchdog or Watchdog(ts)
+        if swing_estimator is not None and body_sensor is not None:
+            raise ConfigError("one swing source per flight: the IMU estimate or the body sensor")
         self.tel = Telemetry(
-            None if swing_estimator is None else ImuSwingEstimator(dict(swing_estimator))
+            None if swing_estimator is None else ImuSwingEstimator(dict(swing_estimator)),
+            body_sensor,
         )
+        #: What the node's log says of its swing columns (Parquet metadata): with the cable
+        #: sensor on the airframe, the source and its settings, so that a model identified on
+        #: the log knows what to fly with (its swing columns are the world-frame angles).
+        self.log_meta: dict | None = None
+        if body_sensor is not None:
+            self.log_meta = {"swing_source": "body", "body_sensor": dict(body_sensor)}
         self._next_beat = 0.0
 
     def set_mode(self, mode: tuple[int, int], timeout: float = 5.0) -> None:
@@ -912,6 +949,19 @@ def model_swing_estimator(model_path) -> dict | None:
         raise ModelError(f"{p}: {exc}") from None
 
 
+def model_body_sensor(model_path) -> dict | None:
+    """The cable sensor on the airframe a flight on the model at ``model_path`` reads
+    (:func:`swingrt.sysid.model_body_sensor`): its settings when the model was identified
+    on it, else None."""
+    from swingrt.sysid import LinearModel, model_body_sensor
+
+    p = Path(model_path)
+    try:
+        return model_body_sensor(LinearModel.load(p))
+    except ModelError as exc:
+        raise ModelError(f"{p}: {exc}") from None
+
+
 #: P gain [1/s] of the East velocity hold while a one-axis controller flies North.
 EAST_HOLD_GAIN = 1.0
 
@@ -942,7 +992,10 @@ def fly(
 ) -> FlightReport:
     """Fly ``mission`` with ``controller`` (any object with ``step``/``reset``) over ``conn``.
 
-    ``acc_limit`` [m/s²] clips the command per axis (default: :func:`command_bound`).
+    A controller whose ``output`` is ``"velocity"`` (the input shaper, the payload feedback
+    of :mod:`swingrt.methods`) commands PX4's velocity loop: its output goes out as North/East
+    velocity setpoints; any other commands acceleration.
+    ``acc_limit`` [m/s²] clips the acceleration per axis (default: :func:`command_bound`).
     With one axis the controller flies North and East is held by a velocity P law
     (a_e = -:data:`EAST_HOLD_GAIN` ve), since PX4 needs North and East setpoints of the same kind.
     Raises :class:`FlightAbort` (after handing back) when a watchdog fires; the trace and
@@ -952,6 +1005,7 @@ def fly(
     limit = command_bound(controller) if acc_limit is None else float(acc_limit)
     if axes not in (1, 2):
         raise ConfigError(f"axes must be 1 or 2, not {axes}")
+    velocity = getattr(controller, "output", "acceleration") == "velocity"
     session = OffboardSession(conn, ts=ts, **session_options)
     session.connect()
     state = np.zeros((axes, 3))
@@ -975,6 +1029,16 @@ def fly(
         a = np.asarray(controller.step(state, ref), dtype=float).reshape(-1)
         if a.shape != (axes,) or not np.all(np.isfinite(a)):
             raise ControlError(f"controller returned {a!r}, expected {axes} finite values")
+        if velocity:
+            # PX4's velocity loop flies it (East held at zero by PX4 with one axis).
+            v_e = float(a[1]) if axes == 2 else 0.0
+            return (
+                MASK_VEL_ALT_HOLD,
+                (0.0, 0.0, session.alt_hold),
+                (float(a[0]), v_e, 0.0),
+                (tel.acc_sp[0], tel.acc_sp[1], 0.0),
+                (float(a[0]), v_e),
+            )
         an = float(np.clip(a[0], -limit, limit))
         ae = float(np.clip(a[1], -limit, limit)) if axes == 2 else -EAST_HOLD_GAIN * tel.vel[1]
         return (
@@ -986,13 +1050,13 @@ def fly(
         )
 
     report = session.run(policy, mission.duration, reset=reset)
-    _finish(report, log_path)
+    _finish(report, log_path, session.log_meta)
     return report
 
 
-def _finish(report: FlightReport, log_path) -> None:
+def _finish(report: FlightReport, log_path, meta: dict | None = None) -> None:
     if log_path is not None:
-        write_columns(report.columns, log_path)
+        write_columns(report.columns, log_path, meta=meta)
     log.info("loop: %s", report.summary())
     if report.aborted:
         exc = FlightAbort(f"{report.aborted}; control handed back to the flight controller")

@@ -115,7 +115,7 @@ def fly_velocity_mission(
             )
 
         report = session.run(policy, mission.duration)
-        _finish(report, out)
+        _finish(report, out, session.log_meta)
         return report
     finally:
         conn.close()

@@ -54,6 +54,7 @@ import numpy as np
 from swingrt.errors import SetpointError
 from swingrt.io.flight import write_columns
 from swingrt.mavlink.link import (
+    BODY_NAME,
     PX4_MAIN_MODE,
     PX4_SUB_MODE_AUTO,
     SWING_NAME,
@@ -387,10 +388,15 @@ class Vehicle:
             )
         elif msg_id == mavlink.MAVLINK_MSG_ID_DEBUG_VECT:
             us = int(round(s["t"] * 1e6))
+            truth = (s.get("swing_true_n", math.nan), s.get("swing_true_e", math.nan))
+            counts = (s.get("adc_x", math.nan), s.get("adc_y", math.nan))
             name, sn, se = SWING_NAME, s["swing_n"], s["swing_e"]
-            if not (math.isfinite(sn) and math.isfinite(se)):
-                name = TRUTH_NAME
-                sn, se = s.get("swing_true_n", math.nan), s.get("swing_true_e", math.nan)
+            if all(math.isfinite(c) for c in counts):
+                # A cable sensor on the airframe sends its raw counts; the truth beside.
+                name, (sn, se) = BODY_NAME, counts
+                self._each(lambda m: m.debug_vect_send(TRUTH_NAME.encode(), us, *truth, 0.0))
+            elif not (math.isfinite(sn) and math.isfinite(se)):
+                name, (sn, se) = TRUTH_NAME, truth
             self._each(lambda m: m.debug_vect_send(name.encode(), us, sn, se, 0.0))
         elif msg_id == mavlink.MAVLINK_MSG_ID_HIGHRES_IMU and "imu_ax" in s:
             # (a simulator without an IMU, such as the tests' stand-ins, sends none)

@@ -101,10 +101,21 @@ class Trained:
 
 
 def _columns(train: Any, dt: float, names: list[str]) -> dict[str, np.ndarray]:
+    """``names`` of a flight on a grid of ``dt``. A flight without the swing rate (a PX4
+    ULog logs the angle only) gets it as the node computes it in flight: the backward
+    difference of the swing over one tick."""
     from swingrt.sysid import _columns as cols
     from swingrt.sysid import resample
 
-    return resample(cols(train), dt, names)
+    have = cols(train)
+    derived = [n for n in names if n.startswith("swing_rate_") and n not in have]
+    wanted = [n for n in names if n not in derived]
+    wanted += [f"swing_{n[-1]}" for n in derived if f"swing_{n[-1]}" not in wanted]
+    out = resample(have, dt, wanted)
+    for n in derived:
+        swing = out[f"swing_{n[-1]}"]
+        out[n] = np.r_[0.0, np.diff(swing)] / dt
+    return out
 
 
 def _split(n: int, dt: float) -> int:
