@@ -683,6 +683,43 @@ def test_fly_against_sitl_damps_swing_like_pure_simulation(tmp_path):
     assert abs(iae_fly - iae_sim) <= 0.2 * iae_sim, (iae_fly, iae_sim)
 
 
+def fly_sensor_chain(tmp_path, source: str, look) -> tuple:
+    """The chain a swing source flies over MAVLink: collect a 240 s training flight with
+    ``[sensors] swing = source``, identify, serve it with ``swingrt sitl`` (physics logged),
+    call ``look(conn)`` on an observer link, then ``swingrt fly`` the model; returns (what
+    ``look`` saw, the scenario file)."""
+    scenario = tmp_path / f"{source}.toml"
+    scenario.write_text(f'[sensors]\nswing = "{source}"\n')
+    train, model = tmp_path / "train.parquet", tmp_path / "model.json"
+    for args, dest in (
+        (["collect", str(scenario), "--duration", "240", "--swing-source", source], train),
+        (["identify", str(train)], model),
+    ):
+        subprocess.run(
+            [sys.executable, "-m", "swingrt", *args, "-o", str(dest)],
+            check=True, timeout=120, capture_output=True,
+        )  # fmt: skip
+    url = f"udp:127.0.0.1:{free_port()}"
+    sitl = subprocess.Popen(
+        [sys.executable, "-m", "swingrt", "sitl", str(scenario), "--listen", url, "--log",
+         str(tmp_path / "physics.parquet")],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    try:
+        conn = observer(url)
+        seen = look(conn)
+        conn.close()
+        res = subprocess.run(
+            [sys.executable, "-m", "swingrt", "fly", "--connect", url, "--model", str(model),
+             "--log", str(tmp_path / "fly.parquet")],
+            timeout=90, capture_output=True, text=True,
+        )  # fmt: skip
+    finally:
+        out = stop(sitl, signal.SIGINT)
+    assert res.returncode == 0, res.stdout + res.stderr + out
+    return seen, scenario
+
+
 def test_fly_without_a_swing_sensor_on_the_imu_that_sitl_streams(tmp_path):
     """Nothing on the cable: ``swingrt sitl`` streams HIGHRES_IMU (the simulator's IMU) and
     the true swing only as DEBUG_VECT "SWTRUE"; ``swingrt fly`` on a model identified on the
@@ -693,35 +730,11 @@ def test_fly_without_a_swing_sensor_on_the_imu_that_sitl_streams(tmp_path):
     from swingrt.io.flight import Trace
     from swingrt.sim import simulate
 
-    imu = tmp_path / "imu.toml"
-    imu.write_text('[sensors]\nswing = "imu"\n')
-    train, model = tmp_path / "train.parquet", tmp_path / "model.json"
-    for args, dest in (
-        (["collect", str(imu), "--duration", "240", "--swing-source", "imu"], train),
-        (["identify", str(train)], model),
-    ):
-        subprocess.run(
-            [sys.executable, "-m", "swingrt", *args, "-o", str(dest)],
-            check=True, timeout=120, capture_output=True,
-        )  # fmt: skip
-    url = f"udp:127.0.0.1:{free_port()}"
-    sitl = subprocess.Popen(
-        [sys.executable, "-m", "swingrt", "sitl", str(imu), "--listen", url, "--log",
-         str(tmp_path / "physics.parquet")],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-    )  # fmt: skip
-    try:
-        conn = observer(url)
-        seen = {k: fresh(conn, k, timeout=3.0) for k in ("HIGHRES_IMU", "DEBUG_VECT")}
-        conn.close()
-        res = subprocess.run(
-            [sys.executable, "-m", "swingrt", "fly", "--connect", url, "--model", str(model),
-             "--log", str(tmp_path / "fly.parquet")],
-            timeout=90, capture_output=True, text=True,
-        )  # fmt: skip
-    finally:
-        out = stop(sitl, signal.SIGINT)
-    assert res.returncode == 0, res.stdout + res.stderr + out
+    seen, imu = fly_sensor_chain(
+        tmp_path,
+        "imu",
+        lambda conn: {k: fresh(conn, k, timeout=3.0) for k in ("HIGHRES_IMU", "DEBUG_VECT")},
+    )
     hr, dv = seen["HIGHRES_IMU"], seen["DEBUG_VECT"]
     assert hr is not None and dv is not None
     # Hovering: the accelerometer reads about -g on the body z axis.
@@ -776,40 +789,18 @@ def test_fly_on_the_cable_sensor_on_the_airframe_over_mavlink(tmp_path):
     from swingrt.io.flight import Trace
     from swingrt.sim import simulate
 
-    body = tmp_path / "body.toml"
-    body.write_text('[sensors]\nswing = "body"\n')
-    train, model = tmp_path / "train.parquet", tmp_path / "model.json"
-    for args, dest in (
-        (["collect", str(body), "--duration", "240"], train),
-        (["identify", str(train)], model),
-    ):
-        subprocess.run(
-            [sys.executable, "-m", "swingrt", *args, "-o", str(dest)],
-            check=True, timeout=120, capture_output=True,
-        )  # fmt: skip
-    url = f"udp:127.0.0.1:{free_port()}"
-    sitl = subprocess.Popen(
-        [sys.executable, "-m", "swingrt", "sitl", str(body), "--listen", url],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-    )  # fmt: skip
-    try:
-        conn = observer(url)
+    def names_of(conn) -> set:
+        # Every DEBUG_VECT of a second (the sensor's and the truth's go out together).
         names = set()
-        deadline = time.monotonic() + 3.0
-        while time.monotonic() < deadline and len(names) < 2:
-            dv = fresh(conn, "DEBUG_VECT", timeout=1.0)
+        deadline = time.monotonic() + 1.0
+        while time.monotonic() < deadline:
+            dv = conn.recv_match(type="DEBUG_VECT", blocking=True, timeout=0.5)
             if dv is not None:
                 name = dv.name if isinstance(dv.name, str) else dv.name.decode("ascii")
                 names.add(name.rstrip("\0"))
-        conn.close()
-        res = subprocess.run(
-            [sys.executable, "-m", "swingrt", "fly", "--connect", url, "--model", str(model),
-             "--log", str(tmp_path / "fly.parquet")],
-            timeout=90, capture_output=True, text=True,
-        )  # fmt: skip
-    finally:
-        out = stop(sitl, signal.SIGINT)
-    assert res.returncode == 0, res.stdout + res.stderr + out
+        return names
+
+    names, body = fly_sensor_chain(tmp_path, "body", names_of)
     assert names == {"SWBODY", "SWTRUE"}, names
     node = Trace.from_parquet(tmp_path / "fly.parquet")
     assert node.meta["swing_source"] == "body"

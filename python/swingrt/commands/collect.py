@@ -28,11 +28,13 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--connect", help="MAVLink URL: fly the mission on a vehicle instead")
     p.add_argument(
         "--swing-source",
-        choices=("sensor", "imu"),
+        choices=("sensor", "body", "imu"),
         default=None,
         help="how the record measures the swing: the swing sensor (default; over MAVLink its "
-        "DEBUG_VECT 'SWING') or none on the cable, the swing estimated from the IMU (over "
-        "MAVLink PX4's HIGHRES_IMU, with the scenario's estimator settings)",
+        "DEBUG_VECT 'SWING'), the cable sensor on the airframe (its ADC counts, over MAVLink "
+        "DEBUG_VECT 'SWBODY', composed with the attitude) or none on the cable, the swing "
+        "estimated from the IMU (over MAVLink PX4's HIGHRES_IMU, with the scenario's "
+        "estimator settings)",
     )
     return p
 
