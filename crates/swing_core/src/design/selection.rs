@@ -21,6 +21,10 @@
 //! everywhere must also damp the swing: its twin
 //! swing excess within a fraction of PX4's own on the same step. When none does, the
 //! settled candidate that swings least is taken rather than the first that settled.
+//!
+//! The decision is pure and separate from the flying: [`judge`] rules on one candidate's
+//! figures (every requirement it violates, as a [`Refusal`] that names the figure and its
+//! bound) and [`choose`] picks among the candidates judged.
 
 use serde::{Deserialize, Serialize};
 use serde_json::json;
@@ -58,7 +62,23 @@ impl Default for CheckBounds {
 impl CheckBounds {
     /// Whether a check's every figure is within its bound.
     pub fn admit(&self, c: &StepCheck) -> bool {
-        c.passes(self.overshoot, self.final_error, self.hold_drift)
+        self.refusals(c).is_empty()
+    }
+
+    /// Every figure of the linear plants' worst check `c` beyond its bound.
+    pub fn refusals(&self, c: &StepCheck) -> Vec<Refusal> {
+        [
+            exceeds(Requirement::LinearOvershoot, c.overshoot, self.overshoot),
+            exceeds(
+                Requirement::LinearFinalError,
+                c.final_error,
+                self.final_error,
+            ),
+            exceeds(Requirement::LinearHoldDrift, c.hold_drift, self.hold_drift),
+        ]
+        .into_iter()
+        .flatten()
+        .collect()
     }
 
     /// How far a check misses its bounds: the largest ratio of a figure to its bound.
@@ -116,15 +136,49 @@ impl Default for TwinBounds {
 impl TwinBounds {
     /// Whether a twin step flight is within these bounds and the linear `bounds`' overshoot.
     pub fn admit(&self, f: &TwinFlight, bounds: &CheckBounds) -> bool {
-        f.settle <= self.settle
-            && f.check.final_error <= self.final_error
-            && f.check.overshoot <= bounds.overshoot
-            && f.check.hold_drift <= bounds.hold_drift
+        self.step_refusals(f, bounds).is_empty()
+    }
+
+    /// Every figure of the twin step flight `f` beyond these bounds or the linear
+    /// `bounds`' overshoot and hold drift.
+    pub fn step_refusals(&self, f: &TwinFlight, bounds: &CheckBounds) -> Vec<Refusal> {
+        [
+            exceeds(Requirement::TwinSettle, f.settle, self.settle),
+            exceeds(
+                Requirement::TwinFinalError,
+                f.check.final_error,
+                self.final_error,
+            ),
+            exceeds(
+                Requirement::TwinOvershoot,
+                f.check.overshoot,
+                bounds.overshoot,
+            ),
+            exceeds(
+                Requirement::TwinHoldDrift,
+                f.check.hold_drift,
+                bounds.hold_drift,
+            ),
+        ]
+        .into_iter()
+        .flatten()
+        .collect()
     }
 
     /// Whether a twin hold flight is within these bounds.
     pub fn holds(&self, h: &TwinHold) -> bool {
-        h.wander <= self.wander && h.late_error <= self.late_error
+        self.hold_refusals(h).is_empty()
+    }
+
+    /// Every figure of the twin hold flight `h` beyond these bounds.
+    pub fn hold_refusals(&self, h: &TwinHold) -> Vec<Refusal> {
+        [
+            exceeds(Requirement::Wander, h.wander, self.wander),
+            exceeds(Requirement::LateError, h.late_error, self.late_error),
+        ]
+        .into_iter()
+        .flatten()
+        .collect()
     }
 
     /// The largest swing excess admitted, given PX4's own flight `pid` of the same step.
@@ -134,7 +188,12 @@ impl TwinBounds {
 
     /// Whether a twin flight damps the swing: its excess is within [`Self::swing_bound`].
     pub fn damps(&self, f: &TwinFlight, pid: &TwinFlight) -> bool {
-        f.swing_excess <= self.swing_bound(pid)
+        self.swing_refusal(f, pid).is_none()
+    }
+
+    /// The refusal of a twin flight `f` whose swing excess is beyond [`Self::swing_bound`].
+    pub fn swing_refusal(&self, f: &TwinFlight, pid: &TwinFlight) -> Option<Refusal> {
+        exceeds(Requirement::Swing, f.swing_excess, self.swing_bound(pid))
     }
 
     /// How far a twin flight misses: the largest ratio of a figure to its bound.
@@ -257,34 +316,126 @@ impl SelectionSettings {
     }
 }
 
-/// One candidate flown in the check.
-#[derive(Clone, Debug, PartialEq)]
-pub struct CheckedCandidate {
-    /// Delays q.
-    pub delays: usize,
-    /// Rank p.
-    pub rank: usize,
-    /// Held-out NMAE from the search.
-    pub nmae: f64,
-    /// Whether every run was within the bounds.
-    pub passed: bool,
-    /// Whether every run was within the bounds but the twin's swing bound (= `passed`
-    /// without a twin).
-    pub settled: bool,
-    /// Worst figures over every plant and lag (NaN when the twin flight failed first and
-    /// the linear plants were not flown).
+/// A requirement of the check: one figure of one flight and its bound.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Requirement {
+    /// The twin step flight's settle time within `TwinBounds::settle`.
+    TwinSettle,
+    /// The twin step flight's final error within `TwinBounds::final_error`.
+    TwinFinalError,
+    /// The twin step flight's overshoot within `CheckBounds::overshoot`.
+    TwinOvershoot,
+    /// The twin step flight's hold drift within `CheckBounds::hold_drift`.
+    TwinHoldDrift,
+    /// The linear plants' worst overshoot within `CheckBounds::overshoot`.
+    LinearOvershoot,
+    /// The linear plants' worst final error within `CheckBounds::final_error`.
+    LinearFinalError,
+    /// The linear plants' worst hold drift within `CheckBounds::hold_drift`.
+    LinearHoldDrift,
+    /// The twin hold flight's wander within `TwinBounds::wander`.
+    Wander,
+    /// The twin hold flight's late error within `TwinBounds::late_error`.
+    LateError,
+    /// The twin step flight's swing excess within [`TwinBounds::swing_bound`].
+    Swing,
+}
+
+impl Requirement {
+    /// The figure's name in a refusal.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::TwinSettle => "twin step settle time",
+            Self::TwinFinalError => "twin step final error",
+            Self::TwinOvershoot => "twin step overshoot",
+            Self::TwinHoldDrift => "twin step hold drift",
+            Self::LinearOvershoot => "linear worst overshoot",
+            Self::LinearFinalError => "linear worst final error",
+            Self::LinearHoldDrift => "linear worst hold drift",
+            Self::Wander => "twin hold wander",
+            Self::LateError => "twin hold late error",
+            Self::Swing => "twin swing excess",
+        }
+    }
+
+    /// The figure's unit, after the figure and after the bound: most figures are
+    /// fractions of the step, which the figure alone says.
+    fn units(self) -> (&'static str, &'static str) {
+        match self {
+            Self::TwinSettle => (" s", " s"),
+            Self::Swing => (" deg·s", " deg·s"),
+            _ => (" of the step", ""),
+        }
+    }
+}
+
+/// One requirement a candidate violates: its figure beyond its bound (or not a number).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Refusal {
+    /// The requirement violated.
+    pub requirement: Requirement,
+    /// The candidate's figure.
+    pub figure: f64,
+    /// The largest figure admitted (inclusive).
+    pub bound: f64,
+}
+
+impl std::fmt::Display for Refusal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (unit, bound_unit) = self.requirement.units();
+        let (name, bound) = (self.requirement.name(), significant(self.bound));
+        if self.figure.is_nan() {
+            write!(f, "{name} is NaN, not within the bound {bound}{bound_unit}")
+        } else {
+            let figure = significant(self.figure);
+            write!(
+                f,
+                "{name} {figure}{unit}, over the bound {bound}{bound_unit}"
+            )
+        }
+    }
+}
+
+/// `figure` against `requirement`'s `bound`, inclusive: NaN is refused, as a flight that
+/// produced no figure proved nothing.
+fn exceeds(requirement: Requirement, figure: f64, bound: f64) -> Option<Refusal> {
+    let within = figure <= bound;
+    (!within).then_some(Refusal {
+        requirement,
+        figure,
+        bound,
+    })
+}
+
+/// `x` to four significant digits without trailing zeros: the figures in a refusal are
+/// read by people, and the full precision is in the diagnostics' numbers.
+fn significant(x: f64) -> String {
+    if !x.is_finite() || x == 0.0 {
+        return x.to_string();
+    }
+    let decimals = (3 - x.abs().log10().floor() as i32).max(0) as usize;
+    let s = format!("{x:.decimals$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
+/// The figures one candidate flew, which [`judge`] rules on.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CandidateFigures {
+    /// Worst figures over every linear plant and lag (NaN when the twin step flight
+    /// failed first and the linear plants were not flown).
     pub worst: StepCheck,
     /// The twin step flight, when a twin was given.
     pub twin: Option<TwinFlight>,
     /// The twin hold flight, when the candidate settled on the step flight and the linear
     /// plants.
     pub hold: Option<TwinHold>,
-    /// The raised Kalman measurement noise these figures were flown with, when the first
-    /// flight's wander asked for it (`SelectionSettings::noise_retry`).
-    pub measurement_noise: Option<f64>,
 }
 
-impl CheckedCandidate {
+impl CandidateFigures {
     /// How far the candidate misses its bounds: the twin's miss first (a candidate that
     /// fails on the twin ranks behind every one that settles there), then the linear one.
     fn miss(&self, settings: &SelectionSettings) -> (f64, f64) {
@@ -301,15 +452,161 @@ impl CheckedCandidate {
         };
         (twin, linear)
     }
+
+    /// The swing excess on the twin (∞ without a twin: nothing shows it damps).
+    fn swing_excess(&self) -> f64 {
+        self.twin.map_or(f64::INFINITY, |f| f.swing_excess)
+    }
 }
 
-/// One candidate's figures in [`select_for_control`].
-struct Evaluation {
-    flight: Option<TwinFlight>,
-    worst: StepCheck,
-    hold: Option<TwinHold>,
-    settled: bool,
-    damps: bool,
+/// The linear figures of a candidate whose twin step flight failed: not flown.
+fn not_flown() -> StepCheck {
+    StepCheck {
+        overshoot: f64::NAN,
+        final_error: f64::NAN,
+        hold_drift: f64::NAN,
+    }
+}
+
+/// The verdict of [`judge`] on one candidate: every requirement it violates.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Verdict {
+    /// The requirements violated, in the order the flights are flown: twin step, linear
+    /// plants, twin hold, swing.
+    pub refusals: Vec<Refusal>,
+}
+
+impl Verdict {
+    /// Whether the candidate is within every bound.
+    pub fn passed(&self) -> bool {
+        self.refusals.is_empty()
+    }
+
+    /// Whether the candidate is within every bound but the swing's.
+    pub fn settled(&self) -> bool {
+        self.refusals
+            .iter()
+            .all(|r| r.requirement == Requirement::Swing)
+    }
+
+    /// Whether the candidate's swing excess is within its bound (or was not flown).
+    pub fn damps(&self) -> bool {
+        self.refusals
+            .iter()
+            .all(|r| r.requirement != Requirement::Swing)
+    }
+
+    /// One line per refusal, naming the requirement, the figure and the bound.
+    pub fn reasons(&self) -> Vec<String> {
+        self.refusals.iter().map(Refusal::to_string).collect()
+    }
+}
+
+/// The verdict on one candidate's `figures` under `settings`' bounds, given PX4's own twin
+/// flight `pid` of the same step (the swing's reference; no swing bound without it).
+///
+/// The flights are gated as [`select_for_control`] flies them: the linear plants only after
+/// the twin step is admitted, the hold only after both. A later flight's figures are
+/// therefore judged only when every earlier one was admitted; otherwise they were not
+/// flown (NaN, absent) and refuse nothing. The swing is judged whenever the twin flew.
+pub fn judge(
+    figures: &CandidateFigures,
+    pid: Option<&TwinFlight>,
+    settings: &SelectionSettings,
+) -> Verdict {
+    let mut refusals = figures.twin.map_or_else(Vec::new, |f| {
+        settings.twin_bounds.step_refusals(&f, &settings.bounds)
+    });
+    if refusals.is_empty() {
+        refusals = settings.bounds.refusals(&figures.worst);
+    }
+    if let (true, Some(h)) = (refusals.is_empty(), &figures.hold) {
+        refusals = settings.twin_bounds.hold_refusals(h);
+    }
+    if let (Some(f), Some(pid)) = (&figures.twin, pid) {
+        refusals.extend(settings.twin_bounds.swing_refusal(f, pid));
+    }
+    Verdict { refusals }
+}
+
+/// One candidate flown in the check.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CheckedCandidate {
+    /// Delays q.
+    pub delays: usize,
+    /// Rank p.
+    pub rank: usize,
+    /// Held-out NMAE from the search.
+    pub nmae: f64,
+    /// The figures flown.
+    pub figures: CandidateFigures,
+    /// The verdict of [`judge`] on them.
+    pub verdict: Verdict,
+    /// The raised Kalman measurement noise these figures were flown with, when the first
+    /// flight's wander asked for it (`SelectionSettings::noise_retry`).
+    pub measurement_noise: Option<f64>,
+}
+
+impl CheckedCandidate {
+    /// Whether every run was within the bounds.
+    pub fn passed(&self) -> bool {
+        self.verdict.passed()
+    }
+
+    /// Whether every run was within the bounds but the twin's swing bound (= `passed`
+    /// without a twin).
+    pub fn settled(&self) -> bool {
+        self.verdict.settled()
+    }
+}
+
+/// How [`choose`] picked a candidate; its text goes into the diagnostics' `pick`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Pick {
+    /// The first candidate that passed.
+    FirstWithinBounds,
+    /// None passed: the settled candidate with the least twin swing excess.
+    LeastSwing,
+    /// None settled: the candidate with the least miss, the twin's before the linear one.
+    LeastMiss,
+}
+
+impl std::fmt::Display for Pick {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::FirstWithinBounds => "the first candidate within every bound",
+            Self::LeastSwing => {
+                "none damped the swing within the bound: the settled candidate that swings least"
+            }
+            Self::LeastMiss => "none settled: the candidate that misses its bounds least",
+        })
+    }
+}
+
+/// The candidate to fly among `checked` (index and how it was picked), `None` when there
+/// is none: the first that passed, else the settled one that swings least, else the one
+/// that misses `settings`' bounds least. Ties go to the earlier candidate.
+pub fn choose(checked: &[CheckedCandidate], settings: &SelectionSettings) -> Option<(usize, Pick)> {
+    if let Some(i) = checked.iter().position(CheckedCandidate::passed) {
+        return Some((i, Pick::FirstWithinBounds));
+    }
+    let least_swing = checked
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| c.settled())
+        .min_by(|(_, a), (_, b)| {
+            let (a, b) = (a.figures.swing_excess(), b.figures.swing_excess());
+            a.total_cmp(&b)
+        });
+    if let Some((i, _)) = least_swing {
+        return Some((i, Pick::LeastSwing));
+    }
+    let least_miss = checked.iter().enumerate().min_by(|(_, a), (_, b)| {
+        let (ta, la) = a.figures.miss(settings);
+        let (tb, lb) = b.figures.miss(settings);
+        ta.total_cmp(&tb).then(la.total_cmp(&lb))
+    });
+    least_miss.map(|(i, _)| (i, Pick::LeastMiss))
 }
 
 /// Outcome of [`select_for_control`].
@@ -383,47 +680,36 @@ pub fn select_for_control(
     let mut screened_out = 0usize;
     let mut verdicts = std::collections::HashMap::new();
     let mut checked: Vec<CheckedCandidate> = Vec::new();
-    // One candidate's figures: the twin's step flight, then the linear plants, then the
-    // twin's hold (the step flight held on), each only when the one before settled. The
-    // MPC is designed once; every flight flies a fresh copy of it.
-    let evaluate =
-        |model: &LinearModel, twin: Option<&TwinPlant>| -> Result<Evaluation, ControlError> {
-            let mpc = MpcController::new(model, mpc_settings.clone())?;
-            let step = match twin {
-                Some(tw) => Some(tw.fly_with(mpc.fresh_copy()?)?),
-                None => None,
-            };
-            let flight = step.as_ref().map(|s| s.flight);
-            let on_twin = flight.is_none_or(|f| settings.twin_bounds.admit(&f, &settings.bounds));
-            let worst = if on_twin {
-                worst_step_check(&mpc, model, &plants, &settings.input_lags, settings.step)?
-            } else {
-                StepCheck {
-                    overshoot: f64::NAN,
-                    final_error: f64::NAN,
-                    hold_drift: f64::NAN,
-                }
-            };
-            let mut settled = on_twin && settings.bounds.admit(&worst);
-            let hold = match (twin, step) {
-                (Some(tw), Some(step)) if settled => Some(tw.hold_on(step, mpc)?),
-                _ => None,
-            };
-            if let Some(h) = &hold {
-                settled = settings.twin_bounds.holds(h);
-            }
-            let damps = match (twin, &flight) {
-                (Some(tw), Some(f)) => settings.twin_bounds.damps(f, tw.pid_flight()),
-                _ => true,
-            };
-            Ok(Evaluation {
-                flight,
-                worst,
-                hold,
-                settled,
-                damps,
-            })
+    let pid = twin.map(TwinPlant::pid_flight);
+    // One candidate's figures and their verdict: the twin's step flight, then the linear
+    // plants, then the twin's hold, each only when `judge` admits every flight before it.
+    // The MPC is designed once; every flight flies a fresh copy of it.
+    let evaluate = |model: &LinearModel| -> Result<(CandidateFigures, Verdict), ControlError> {
+        let mpc = MpcController::new(model, mpc_settings.clone())?;
+        let step = match twin {
+            Some(tw) => Some(tw.fly_with(mpc.fresh_copy()?)?),
+            None => None,
         };
+        let mut figures = CandidateFigures {
+            worst: not_flown(),
+            twin: step.as_ref().map(|s| s.flight),
+            hold: None,
+        };
+        let on_twin = figures
+            .twin
+            .is_none_or(|f| settings.twin_bounds.admit(&f, &settings.bounds));
+        if on_twin {
+            figures.worst =
+                worst_step_check(&mpc, model, &plants, &settings.input_lags, settings.step)?;
+        }
+        if let (Some(tw), Some(step)) = (twin, step) {
+            if judge(&figures, pid, settings).settled() {
+                figures.hold = Some(tw.hold_on(step, mpc)?);
+            }
+        }
+        Ok((figures, judge(&figures, pid, settings)))
+    };
+    let wander = |f: &CandidateFigures| f.hold.map_or(f64::INFINITY, |h| h.wander);
     let mut chosen = None;
     for row in rows {
         if checked.len() >= settings.candidates {
@@ -441,82 +727,51 @@ pub fn select_for_control(
             }
         }
         let mut model = model;
-        let mut run = evaluate(&model, twin)?;
-        let wander = |e: &Evaluation| e.hold.map_or(f64::INFINITY, |h| h.wander);
+        let (mut figures, mut verdict) = evaluate(&model)?;
         // Only a candidate that settled up to its hold has a wander to retry.
-        let noisy = run
+        let noisy = figures
             .hold
             .is_some_and(|h| h.wander > settings.noise_retry_wander);
         if noisy && settings.noise_retry > 1.0 {
             let mut retry = model.clone();
             retry.diagnostics.measurement_noise =
                 Some(mpc_settings.kf_measurement_noise * settings.noise_retry);
-            let again = evaluate(&retry, twin)?;
-            let better = again.settled
-                && (!run.settled || ((again.damps || !run.damps) && wander(&again) < wander(&run)));
+            let (again, again_verdict) = evaluate(&retry)?;
+            let better = again_verdict.settled()
+                && (!verdict.settled()
+                    || ((again_verdict.damps() || !verdict.damps())
+                        && wander(&again) < wander(&figures)));
             if better {
-                (model, run) = (retry, again);
+                (model, figures, verdict) = (retry, again, again_verdict);
             }
         }
-        let Evaluation {
-            flight,
-            worst,
-            hold,
-            settled,
-            damps,
-        } = run;
+        let passed = verdict.passed();
         checked.push(CheckedCandidate {
             delays: row.delays,
             rank: row.rank,
             nmae: row.nmae,
-            passed: settled && damps,
-            settled,
-            worst,
-            twin: flight,
-            hold,
+            figures,
+            verdict,
             measurement_noise: model.diagnostics.measurement_noise,
         });
-        if settled && damps {
+        if passed {
             chosen = Some(model);
             break;
         }
     }
-    let passed = chosen.is_some();
-    // A checked candidate's model, with the estimator noise it was flown with.
-    let refit_as = |c: &CheckedCandidate| -> Result<LinearModel, ControlError> {
-        let mut m = refit(c.delays, c.rank)?;
-        m.diagnostics.measurement_noise = c.measurement_noise;
-        Ok(m)
-    };
-    // Without a pass: the settled candidate that swings least, else the least miss.
-    let least_swing = checked.iter().filter(|c| c.settled).min_by(|a, b| {
-        let swing = |c: &CheckedCandidate| c.twin.map_or(f64::INFINITY, |f| f.swing_excess);
-        swing(a).total_cmp(&swing(b))
-    });
-    let (mut model, pick) = match chosen {
-        Some(m) => (m, "the first candidate within every bound"),
-        None => match least_swing {
-            Some(c) => (
-                refit_as(c)?,
-                "none damped the swing within the bound: the settled candidate that swings least",
-            ),
-            None => {
-                let least = checked
-                    .iter()
-                    .min_by(|a, b| {
-                        let (ta, la) = a.miss(settings);
-                        let (tb, lb) = b.miss(settings);
-                        ta.total_cmp(&tb).then(la.total_cmp(&lb))
-                    })
-                    .ok_or_else(|| {
-                        ControlError::Model("the search has no stable candidate to check".into())
-                    })?;
-                (
-                    refit_as(least)?,
-                    "none settled: the candidate that misses its bounds least",
-                )
-            }
-        },
+    let (pick_index, pick) = choose(&checked, settings)
+        .ok_or_else(|| ControlError::Model("the search has no stable candidate to check".into()))?;
+    let passed = pick == Pick::FirstWithinBounds;
+    // The candidate that passed is the model in hand; any other is refitted, with the
+    // estimator noise it was flown with.
+    let mut model = match chosen {
+        Some(m) => m,
+        None => {
+            let c = &checked[pick_index];
+            let mut m = refit(c.delays, c.rank)?;
+            m.diagnostics.measurement_noise = c.measurement_noise;
+            m
+        }
     };
     let selected = search
         .table
@@ -547,27 +802,34 @@ pub fn select_for_control(
                 "swing_bound": settings.twin_bounds.swing_bound(t.pid_flight()),
             })),
             "passed": passed,
-            "pick": pick,
+            "pick": pick.to_string(),
             "screened_out": screened_out,
-            "checked": checked.iter().map(|c| json!({
-                "delays": c.delays,
-                "rank": c.rank,
-                "nmae": c.nmae,
-                "passed": c.passed,
-                "settled": c.settled,
-                "overshoot": c.worst.overshoot,
-                "final_error": c.worst.final_error,
-                "hold_drift": c.worst.hold_drift,
-                "twin": c.twin.as_ref().map(flight_json),
-                "measurement_noise": c.measurement_noise,
-                "hold": c.hold.map(|h| json!({"wander": h.wander, "late_error": h.late_error})),
-            })).collect::<Vec<_>>(),
+            "checked": checked.iter().map(checked_json).collect::<Vec<_>>(),
         }),
     );
     Ok(Selection {
         model,
         passed,
         checked,
+    })
+}
+
+/// A checked candidate's figures and verdict for the diagnostics.
+fn checked_json(c: &CheckedCandidate) -> serde_json::Value {
+    let f = &c.figures;
+    json!({
+        "delays": c.delays,
+        "rank": c.rank,
+        "nmae": c.nmae,
+        "passed": c.passed(),
+        "settled": c.settled(),
+        "refused": c.verdict.reasons(),
+        "overshoot": f.worst.overshoot,
+        "final_error": f.worst.final_error,
+        "hold_drift": f.worst.hold_drift,
+        "twin": f.twin.as_ref().map(flight_json),
+        "measurement_noise": c.measurement_noise,
+        "hold": f.hold.map(|h| json!({"wander": h.wander, "late_error": h.late_error})),
     })
 }
 
@@ -580,4 +842,352 @@ fn flight_json(f: &TwinFlight) -> serde_json::Value {
         "hold_drift": f.check.hold_drift,
         "swing_excess": f.swing_excess,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// PX4's own flight: a swing excess of 10 deg·s puts the swing bound at 3 deg·s.
+    fn pid() -> TwinFlight {
+        TwinFlight {
+            check: StepCheck {
+                overshoot: 0.0,
+                final_error: 0.0,
+                hold_drift: 0.0,
+            },
+            settle: 2.0,
+            swing_excess: 10.0,
+        }
+    }
+
+    /// Figures within every default bound.
+    fn good() -> CandidateFigures {
+        CandidateFigures {
+            worst: StepCheck {
+                overshoot: 0.1,
+                final_error: 0.01,
+                hold_drift: 0.02,
+            },
+            twin: Some(TwinFlight {
+                check: StepCheck {
+                    overshoot: 0.1,
+                    final_error: 0.001,
+                    hold_drift: 0.01,
+                },
+                settle: 3.0,
+                swing_excess: 1.5,
+            }),
+            hold: Some(TwinHold {
+                wander: 0.001,
+                late_error: 0.002,
+            }),
+        }
+    }
+
+    /// `good()` with its twin step flight changed by `f`.
+    fn with_twin(f: impl FnOnce(&mut TwinFlight)) -> CandidateFigures {
+        let mut figures = good();
+        f(figures.twin.as_mut().unwrap());
+        figures
+    }
+
+    /// `good()` with its twin hold flight changed by `f`.
+    fn with_hold(f: impl FnOnce(&mut TwinHold)) -> CandidateFigures {
+        let mut figures = good();
+        f(figures.hold.as_mut().unwrap());
+        figures
+    }
+
+    /// `good()` with its linear worst check changed by `f`.
+    fn with_worst(f: impl FnOnce(&mut StepCheck)) -> CandidateFigures {
+        let mut figures = good();
+        f(&mut figures.worst);
+        figures
+    }
+
+    fn verdict(figures: &CandidateFigures) -> Verdict {
+        judge(figures, Some(&pid()), &SelectionSettings::default())
+    }
+
+    /// A candidate judged as `select_for_control` judges it.
+    fn checked(figures: CandidateFigures) -> CheckedCandidate {
+        CheckedCandidate {
+            delays: 1,
+            rank: 1,
+            nmae: 0.1,
+            figures,
+            verdict: verdict(&figures),
+            measurement_noise: None,
+        }
+    }
+
+    fn refusal(requirement: Requirement, figure: f64, bound: f64) -> Refusal {
+        Refusal {
+            requirement,
+            figure,
+            bound,
+        }
+    }
+
+    #[test]
+    fn a_candidate_within_every_bound_passes() {
+        let v = verdict(&good());
+        assert_eq!(v.refusals, vec![], "{:?}", v.reasons());
+        assert!(v.passed() && v.settled() && v.damps());
+    }
+
+    #[test]
+    fn each_requirement_violated_alone_is_the_one_reason_refused() {
+        use Requirement::*;
+        let cases = [
+            (with_twin(|f| f.settle = 7.5), refusal(TwinSettle, 7.5, 6.0)),
+            (
+                with_twin(|f| f.check.final_error = 0.0075),
+                refusal(TwinFinalError, 0.0075, 0.005),
+            ),
+            (
+                with_twin(|f| f.check.overshoot = 0.5),
+                refusal(TwinOvershoot, 0.5, 0.35),
+            ),
+            (
+                with_twin(|f| f.check.hold_drift = 0.25),
+                refusal(TwinHoldDrift, 0.25, 0.1),
+            ),
+            (
+                with_worst(|c| c.overshoot = 0.45),
+                refusal(LinearOvershoot, 0.45, 0.35),
+            ),
+            (
+                with_worst(|c| c.final_error = 0.06),
+                refusal(LinearFinalError, 0.06, 0.03),
+            ),
+            (
+                with_worst(|c| c.hold_drift = 0.15),
+                refusal(LinearHoldDrift, 0.15, 0.1),
+            ),
+            (
+                with_hold(|h| h.wander = 0.008),
+                refusal(Wander, 0.008, 0.005),
+            ),
+            (
+                with_hold(|h| h.late_error = 0.02),
+                refusal(LateError, 0.02, 0.01),
+            ),
+            (
+                with_twin(|f| f.swing_excess = 4.5),
+                refusal(Swing, 4.5, 3.0),
+            ),
+        ];
+        for (figures, expected) in cases {
+            let v = verdict(&figures);
+            assert_eq!(v.refusals, vec![expected], "{:?}", v.reasons());
+            assert!(!v.passed());
+            assert_eq!(v.settled(), expected.requirement == Swing);
+        }
+    }
+
+    #[test]
+    fn a_refusal_names_the_requirement_the_figure_and_the_bound() {
+        let line = |r: Refusal| r.to_string();
+        assert_eq!(
+            line(refusal(Requirement::TwinSettle, 7.5, 6.0)),
+            "twin step settle time 7.5 s, over the bound 6 s"
+        );
+        assert_eq!(
+            line(refusal(Requirement::LinearFinalError, 0.061234567, 0.03)),
+            "linear worst final error 0.06123 of the step, over the bound 0.03"
+        );
+        assert_eq!(
+            line(refusal(Requirement::Swing, 4.5, 3.0)),
+            "twin swing excess 4.5 deg·s, over the bound 3 deg·s"
+        );
+        assert_eq!(
+            line(refusal(Requirement::Wander, f64::INFINITY, 0.005)),
+            "twin hold wander inf of the step, over the bound 0.005"
+        );
+        assert_eq!(
+            line(refusal(Requirement::LinearOvershoot, f64::NAN, 0.35)),
+            "linear worst overshoot is NaN, not within the bound 0.35"
+        );
+        let v = verdict(&with_hold(|h| h.late_error = 0.02));
+        assert_eq!(
+            v.reasons(),
+            vec!["twin hold late error 0.02 of the step, over the bound 0.01"]
+        );
+    }
+
+    #[test]
+    fn figures_exactly_at_their_bounds_pass() {
+        let s = SelectionSettings::default();
+        let (b, t) = (s.bounds, s.twin_bounds);
+        let at_bounds = CandidateFigures {
+            worst: StepCheck {
+                overshoot: b.overshoot,
+                final_error: b.final_error,
+                hold_drift: b.hold_drift,
+            },
+            twin: Some(TwinFlight {
+                check: StepCheck {
+                    overshoot: b.overshoot,
+                    final_error: t.final_error,
+                    hold_drift: b.hold_drift,
+                },
+                settle: t.settle,
+                swing_excess: t.swing_bound(&pid()),
+            }),
+            hold: Some(TwinHold {
+                wander: t.wander,
+                late_error: t.late_error,
+            }),
+        };
+        let v = judge(&at_bounds, Some(&pid()), &s);
+        assert!(v.passed(), "{:?}", v.reasons());
+    }
+
+    #[test]
+    fn a_short_cable_s_swing_is_bounded_by_the_floor_not_by_px4_s_fraction() {
+        let calm = TwinFlight {
+            swing_excess: 2.0,
+            ..pid()
+        };
+        let floor = SelectionSettings::default().twin_bounds.swing_excess_min;
+        let v = judge(
+            &with_twin(|f| f.swing_excess = floor),
+            Some(&calm),
+            &SelectionSettings::default(),
+        );
+        assert!(v.passed(), "{:?}", v.reasons());
+        let v = judge(
+            &with_twin(|f| f.swing_excess = 1.2),
+            Some(&calm),
+            &SelectionSettings::default(),
+        );
+        assert_eq!(v.refusals, vec![refusal(Requirement::Swing, 1.2, floor)]);
+    }
+
+    #[test]
+    fn a_settled_candidate_that_swings_too_much_is_settled_but_not_passed() {
+        let c = checked(with_twin(|f| f.swing_excess = 6.0));
+        assert!(c.settled() && !c.passed() && !c.verdict.damps());
+    }
+
+    #[test]
+    fn flights_gated_behind_a_failed_one_refuse_nothing() {
+        // The twin step failed: the linear plants and the hold were not flown.
+        let mut figures = with_twin(|f| *f = TwinFlight::diverged());
+        figures.worst = not_flown();
+        figures.hold = None;
+        let v = verdict(&figures);
+        let failed: Vec<_> = v.refusals.iter().map(|r| r.requirement).collect();
+        use Requirement::*;
+        let twin = [TwinSettle, TwinFinalError, TwinOvershoot, TwinHoldDrift];
+        assert_eq!(failed, [&twin[..], &[Swing]].concat(), "{:?}", v.reasons());
+        // Whatever the later figures say, they were not flown after a failed twin step...
+        let mut late = with_twin(|f| f.settle = 9.0);
+        late.worst.final_error = 1.0;
+        late.hold = Some(TwinHold::diverged());
+        assert_eq!(verdict(&late).refusals, vec![refusal(TwinSettle, 9.0, 6.0)]);
+        // ... nor the hold after a failed linear check.
+        let mut late = with_worst(|c| c.final_error = 0.06);
+        late.hold = Some(TwinHold::diverged());
+        let v = verdict(&late);
+        assert_eq!(v.refusals, vec![refusal(LinearFinalError, 0.06, 0.03)]);
+    }
+
+    #[test]
+    fn without_a_twin_only_the_linear_plants_are_judged() {
+        let s = SelectionSettings::default();
+        let linear_only = CandidateFigures {
+            twin: None,
+            hold: None,
+            ..good()
+        };
+        assert!(judge(&linear_only, None, &s).passed());
+        let bad = CandidateFigures {
+            twin: None,
+            hold: None,
+            ..with_worst(|c| c.hold_drift = f64::NAN)
+        };
+        let v = judge(&bad, None, &s);
+        assert_eq!(v.refusals.len(), 1, "{:?}", v.reasons());
+        assert_eq!(v.refusals[0].requirement, Requirement::LinearHoldDrift);
+        // A twin flown without PX4's flight to compare has no swing bound.
+        let swinging = with_twin(|f| f.swing_excess = 50.0);
+        assert!(judge(&swinging, None, &s).passed());
+    }
+
+    #[test]
+    fn the_first_candidate_that_passes_is_chosen_even_if_a_later_one_swings_less() {
+        let s = SelectionSettings::default();
+        let checked = [
+            checked(with_twin(|f| f.swing_excess = 5.0)),
+            checked(with_twin(|f| f.swing_excess = 2.5)),
+            checked(with_twin(|f| f.swing_excess = 0.5)),
+        ];
+        assert_eq!(choose(&checked, &s), Some((1, Pick::FirstWithinBounds)));
+    }
+
+    #[test]
+    fn with_none_passing_the_settled_candidate_that_swings_least_is_chosen() {
+        let s = SelectionSettings::default();
+        let mut unsettled = with_twin(|f| f.swing_excess = 0.1);
+        unsettled.hold = Some(TwinHold::diverged());
+        let checked = [
+            checked(unsettled),
+            checked(with_twin(|f| f.swing_excess = 5.0)),
+            checked(with_twin(|f| f.swing_excess = 4.0)),
+            checked(with_twin(|f| f.swing_excess = 4.0)),
+            checked(with_twin(|f| f.swing_excess = 4.5)),
+        ];
+        assert_eq!(choose(&checked, &s), Some((2, Pick::LeastSwing)));
+    }
+
+    #[test]
+    fn with_none_settled_the_least_miss_is_chosen_the_twin_s_before_the_linear_one() {
+        let s = SelectionSettings::default();
+        // 1.2 times the twin's settle bound; the linear plants not flown.
+        let mut twin_late = with_twin(|f| f.settle = 7.2);
+        twin_late.worst = not_flown();
+        twin_late.hold = None;
+        // Settled on the twin; 3 and 2 times the linear final error bound.
+        let linear_far = with_worst(|c| c.final_error = 0.09);
+        let linear_near = with_worst(|c| c.final_error = 0.06);
+        let mut candidates = vec![checked(twin_late), checked(linear_far)];
+        assert_eq!(choose(&candidates, &s), Some((1, Pick::LeastMiss)));
+        candidates.push(checked(linear_near));
+        assert_eq!(choose(&candidates, &s), Some((2, Pick::LeastMiss)));
+        assert_eq!(choose(&[], &s), None);
+    }
+
+    #[test]
+    fn a_pick_reads_as_the_diagnostics_have_always_said_it() {
+        assert_eq!(
+            Pick::FirstWithinBounds.to_string(),
+            "the first candidate within every bound"
+        );
+        assert_eq!(
+            Pick::LeastSwing.to_string(),
+            "none damped the swing within the bound: the settled candidate that swings least"
+        );
+        assert_eq!(
+            Pick::LeastMiss.to_string(),
+            "none settled: the candidate that misses its bounds least"
+        );
+    }
+
+    #[test]
+    fn the_bounds_admit_what_judge_does_not_refuse() {
+        let s = SelectionSettings::default();
+        let (b, t) = (s.bounds, s.twin_bounds);
+        let f = good();
+        let (flight, hold) = (f.twin.unwrap(), f.hold.unwrap());
+        assert!(b.admit(&f.worst) && t.admit(&flight, &b) && t.holds(&hold));
+        assert!(t.damps(&flight, &pid()));
+        let bad = with_worst(|c| c.overshoot = f64::NAN);
+        assert!(!b.admit(&bad.worst));
+        assert!(!t.admit(&TwinFlight::diverged(), &b));
+        assert!(!t.holds(&TwinHold::diverged()));
+        assert!(!t.damps(&TwinFlight::diverged(), &pid()));
+    }
 }
