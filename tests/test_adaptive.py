@@ -299,3 +299,70 @@ def test_fly_adapt_against_sitl(identified, tmp_path):
     assert "adaptive MPC adopted" in res.stdout
     tr = load_flight(log, columns=["t", "vn"])
     assert 0.7 < np.mean(tr["vn"][(tr["t"] > 4.5) & (tr["t"] < 6.0)]) < 1.3
+
+
+def test_the_offboard_nodes_adaptive_mpc_re_identifies_on_the_models_twin(tmp_path):
+    """``fly --adapt``'s controller (``load_controller(adapt=True)``): a model selected on a
+    twin carries it (``diagnostics.twin``: the vehicle and the white-box payload), and the
+    node's adaptive MPC re-identifies on it for the cable length it measures. Flown in the
+    simulator as the node flies it (a controller object on acceleration setpoints): the cable
+    is winched 1.0 -> 0.4 m in hover, then a 2 m/s step. With the twin it adopts a model for
+    about 0.4 m and damps the swing; with ``twin=False`` (the online DMDc alone) it swings far
+    more."""
+    from swingrt import sysid
+    from swingrt.mavlink.offboard import load_controller
+    from swingrt.metrics import step_metrics
+    from swingrt.sim import collect
+
+    train = resolve({"payload": {"mass": 0.2, "length": 1.0}}, default="training")
+    data = collect(train)
+    model = sysid.select_for_control(data, sysid.search(data), twin=train).model
+    twin, (m_p, length, m_q) = sysid.model_twin(model)
+    assert m_p == pytest.approx(0.2, rel=0.1) and length == pytest.approx(1.0, rel=0.05)
+    assert m_q == pytest.approx(train.to_dict()["vehicle"]["mass"])
+    assert twin.to_dict()["random_steps"]["axes"] == "n"
+    path = tmp_path / "model.json"
+    model.save(path)
+    from swingrt.sysid import LinearModel
+
+    assert sysid.model_twin(LinearModel.load(path))[1] == (m_p, length, m_q)
+
+    winch = {
+        "duration": 45.0,
+        "payload": {
+            "mass": 0.2,
+            "length": 1.0,
+            "events": [{"t": 3.0, "action": "winch", "length": 0.4, "rate": 0.3}],
+        },
+        "setpoints": [{"t": 0.0, "vn": 0.0}, {"t": 25.0, "vn": 2.0}],
+    }
+    excess = {}
+    for use_twin in (True, False):
+        ctrl, ts, axes = load_controller(
+            path, adapt=True, adaptive={"synthesis": "deferred"}, twin=use_twin
+        )
+        sim = _core.Simulator(resolve(winch, default="step"))
+        sim.attach_python(ctrl, axes, ts, "acceleration", 0.0, 60.0)
+        sim.run_to_end()
+        tr = {k: np.asarray(v) for k, v in sim.take_trace().items()}
+        excess[use_twin] = step_metrics(tr, t0=25.0, axis="n")["swing_excess_iae_deg_s"]
+        adopted = [v for _, what, v in ctrl.events() if what == "adopted"]
+        if use_twin:
+            requested = [v for _, what, v in ctrl.events() if what == "requested"]
+            assert adopted, ctrl.events()
+            assert any(abs(v - 0.4) < 0.08 for v in requested), ctrl.events()
+    assert excess[True] < 2.0, excess
+    assert excess[True] < 0.25 * excess[False], excess
+
+
+def test_a_twin_record_that_is_not_one_is_a_model_error():
+    from swingrt import sysid
+    from swingrt.errors import ModelError
+
+    model = _core.pendulum_model(delays=4, axes=1)
+    assert sysid.model_twin(model) is None
+    bad = model.with_diagnostics({"twin": {"scenario": {}, "payload_mass": "x"}})
+    with pytest.raises(ModelError, match="diagnostics.twin"):
+        sysid.model_twin(bad)
+    with pytest.raises(ConfigError, match="twin"):
+        _core.AdaptiveMpc(model, None, None, resolve({}, default="training"), None)

@@ -356,6 +356,7 @@ def test_silent_link_gives_clear_error():
         (["--model", "m.json", "--target", "payload"], "apply to a waypoint plan"),
         (["--mission", "steps.toml", "--model", "m.json"], "m.json"),
         (["--mission", "plan.txt", "--model", "m.json"], "must end in .toml or .plan"),
+        (["--model", "m.json", "--no-twin"], "--no-twin applies to --adapt"),
     ],
 )
 def test_fly_refuses_a_wrong_plan_request_in_one_line(tmp_path, capsys, extra, message):

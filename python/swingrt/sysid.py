@@ -53,6 +53,7 @@ __all__ = [
     "model_body_sensor",
     "with_thrust",
     "model_estimator",
+    "model_twin",
     "resample",
     "search",
     "check_plant",
@@ -327,6 +328,32 @@ def model_body_sensor(model: LinearModel) -> dict[str, Any] | None:
     return dict(body)
 
 
+def model_twin(model: LinearModel) -> tuple[_core.Scenario, tuple[float, float, float]] | None:
+    """The vehicle twin ``model`` was selected on, as the adaptive MPC's twin path flies it
+    (``AdaptiveMpc(..., twin=, twin_payload=)``): that vehicle's training flight (its
+    airframe, PX4 gains and swing sensing; table 4.1's random steps on the model's axes) and
+    (payload mass [kg], cable length [m], vehicle mass [kg]) of the white-box estimate the
+    model was checked with; None for a model selected without a twin."""
+    from swingrt.scenario import resolve
+
+    rec = model.diagnostics.get("twin")
+    if rec is None:
+        return None
+    try:
+        sc = rec["scenario"]
+        payload = (
+            float(rec["payload_mass"]),
+            float(rec["cable_length"]),
+            float(rec["vehicle_mass"]),
+        )
+        sections = {k: sc[k] for k in ("vehicle", "controller", "sensors") if k in sc}
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ModelError(f"diagnostics.twin: not a twin record ({exc})") from None
+    axes = "ne" if len(model.inputs) == 2 else "n"
+    training = resolve({**sections, "random_steps": {"axes": axes}}, default="training")
+    return training, payload
+
+
 def model_estimator(model: LinearModel) -> dict[str, Any] | None:
     """The swing estimator a flight on ``model`` must run: the settings it was identified
     with when its swing is the IMU's estimate (its swing output is that estimate: another
@@ -537,6 +564,20 @@ def select_for_control(
         x, u, states, inputs, s, result.search, plant, mpc_settings, selection, twin
     )
     model = _with_source(model, data)
+    wb = plant.diagnostics.get("whitebox")
+    if twin is not None and isinstance(wb, dict):
+        # What the model was selected on: the adaptive MPC re-identifies on the same twin
+        # in flight (:func:`model_twin`).
+        model = model.with_diagnostics(
+            {
+                "twin": {
+                    "scenario": twin.to_dict(),
+                    "payload_mass": float(wb["payload_mass"]),
+                    "cable_length": float(wb["length"]),
+                    "vehicle_mass": float(wb["vehicle_mass"]),
+                }
+            }
+        )
     return SearchResult(model=model, table=result.table, search=result.search, settings=s)
 
 

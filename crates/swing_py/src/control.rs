@@ -23,6 +23,7 @@ use swing_core::testing::pendulum_delay_model;
 
 use crate::convert;
 use crate::errors::to_py;
+use crate::sim::{twin_prior, PyScenario};
 use crate::sysid::PyLinearModel;
 
 /// Read a state array of shape (axes, 3) — or (3,) for one axis — of [v, swing, swing_rate].
@@ -205,20 +206,27 @@ pub struct PyAdaptiveMpc {
 
 #[pymethods]
 impl PyAdaptiveMpc {
-    /// Design the first MPC on `model` with MPC `settings` and `adaptive` settings.
+    /// Design the first MPC on `model` with MPC `settings` and `adaptive` settings; `twin`
+    /// (the vehicle's training-flight scenario) with `twin_payload` = (payload mass [kg],
+    /// cable length [m], vehicle mass [kg]) the model was identified for enables the twin
+    /// path (`adaptive.twin.enabled`): re-identification on the twin for the cable length
+    /// measured in flight.
     #[new]
-    #[pyo3(signature = (model, settings=None, adaptive=None))]
+    #[pyo3(signature = (model, settings=None, adaptive=None, twin=None, twin_payload=None))]
     fn new(
         py: Python<'_>,
         model: &PyLinearModel,
         settings: Option<&Bound<'_, PyAny>>,
         adaptive: Option<&Bound<'_, PyAny>>,
+        twin: Option<&PyScenario>,
+        twin_payload: Option<(f64, f64, f64)>,
     ) -> PyResult<Self> {
         let model = model.inner.clone();
         let s: MpcSettings = convert::settings(settings, "settings")?;
         let a: AdaptiveSettings = convert::settings(adaptive, "adaptive")?;
+        let prior = twin_prior(&a, twin, twin_payload)?;
         let inner = py
-            .detach(|| AdaptiveMpc::new(&model, s, a))
+            .detach(|| AdaptiveMpc::with_twin(&model, s, a, prior))
             .map_err(to_py)?;
         Ok(Self { inner })
     }
@@ -259,6 +267,12 @@ impl PyAdaptiveMpc {
     #[getter]
     fn swaps(&self) -> usize {
         self.inner.swaps()
+    }
+
+    /// Why the last re-synthesis was rejected ("" when none was).
+    #[getter]
+    fn last_rejection(&self) -> String {
+        self.inner.last_rejection().to_string()
     }
 
     /// Tick period [s] (the model's dt).

@@ -52,6 +52,12 @@ impl PyHilPlant {
         self.inner.on_ground()
     }
 
+    /// Count the payload events still ahead from `origin` [s] of the plant's clock on
+    /// (a session that takes off first times them from its hold in the air).
+    fn count_payload_events_from(&mut self, origin: f64) -> PyResult<()> {
+        self.inner.count_payload_events_from(origin).map_err(to_py)
+    }
+
     /// Advance one lockstep step under normalised motor commands in PX4's rotor order.
     fn step(&mut self, motors: [f64; 4]) -> PyResult<()> {
         self.inner.step(motors).map_err(to_py)

@@ -18,6 +18,37 @@ use swing_core::ConfigError;
 use crate::errors::to_py;
 use crate::sysid::PyLinearModel;
 
+/// The adaptive MPC's twin path prior from the training flight's scenario `twin` and
+/// `twin_payload` = (payload mass [kg], cable length [m], vehicle mass [kg]) the model was
+/// identified for: both or neither.
+pub(crate) fn twin_prior(
+    adaptive: &AdaptiveSettings,
+    twin: Option<&PyScenario>,
+    twin_payload: Option<(f64, f64, f64)>,
+) -> PyResult<Option<TwinPrior>> {
+    match (twin, twin_payload) {
+        (Some(sc), Some((payload_mass, length, vehicle_mass))) => {
+            let twin = Twin::new(
+                &sc.inner,
+                adaptive.twin.duration,
+                vehicle_mass,
+                adaptive.twin.search,
+            )
+            .map_err(|e| to_py(ConfigError::new("twin", e)))?;
+            Ok(Some(TwinPrior {
+                twin,
+                payload_mass,
+                length,
+            }))
+        }
+        (None, None) => Ok(None),
+        _ => Err(to_py(ConfigError::new(
+            "twin_payload",
+            "twin and twin_payload go together",
+        ))),
+    }
+}
+
 /// A core trace as a dict of numpy columns.
 pub fn trace_to_dict<'py>(py: Python<'py>, trace: Trace) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
@@ -338,29 +369,7 @@ impl PySimulator {
     ) -> PyResult<()> {
         let settings: MpcSettings = crate::convert::settings(settings, "mpc")?;
         let adaptive: AdaptiveSettings = crate::convert::settings(adaptive, "adaptive")?;
-        let prior = match (twin, twin_payload) {
-            (Some(sc), Some((payload_mass, length, vehicle_mass))) => {
-                let twin = Twin::new(
-                    &sc.inner,
-                    adaptive.twin.duration,
-                    vehicle_mass,
-                    adaptive.twin.search,
-                )
-                .map_err(|e| to_py(ConfigError::new("twin", e)))?;
-                Some(TwinPrior {
-                    twin,
-                    payload_mass,
-                    length,
-                })
-            }
-            (None, None) => None,
-            _ => {
-                return Err(to_py(ConfigError::new(
-                    "twin_payload",
-                    "twin and twin_payload go together",
-                )))
-            }
-        };
+        let prior = twin_prior(&adaptive, twin, twin_payload)?;
         let ctrl =
             AdaptiveMpc::with_twin(&model.inner, settings, adaptive, prior).map_err(to_py)?;
         self.sim_mut()

@@ -48,7 +48,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "--adapt",
         action="store_true",
         help="fly the adaptive MPC: the model follows the payload in flight (online DMDc, "
-        "change detector, checked re-synthesis on a worker thread)",
+        "change detector, checked re-synthesis on a worker thread); a model selected on a "
+        "vehicle twin is re-identified on that twin for the cable length measured in flight",
+    )
+    p.add_argument(
+        "--no-twin",
+        action="store_true",
+        help="with --adapt: re-identify on the online DMDc alone, not on the model's twin",
     )
     p.add_argument(
         "--target",
@@ -128,11 +134,20 @@ def run(args) -> int:
         raise ConfigError("--target and --cable-length apply to a waypoint plan (--mission PLAN)")
     if plan is not None and args.adapt:
         raise ConfigError("--adapt flies velocity steps; a waypoint plan flies the position MPC")
+    if args.no_twin and not args.adapt:
+        raise ConfigError("--no-twin applies to --adapt")
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
     if plan is not None:
         return _fly_plan(args, plan)
     mission = Mission.from_toml(args.mission) if args.mission else Mission.default()
-    controller, ts, axes = load_controller(args.model, adapt=args.adapt)
+    controller, ts, axes = load_controller(args.model, adapt=args.adapt, twin=not args.no_twin)
+    if args.adapt:
+        from swingrt.sysid import LinearModel, model_twin
+
+        path = "off (--no-twin)" if args.no_twin else "the model's own"
+        if not args.no_twin and model_twin(LinearModel.load(args.model)) is None:
+            path = "none (the model was selected without one): online DMDc alone"
+        print(f"fly: adaptive MPC, twin {path}", flush=True)
     watchdog = Watchdog(
         ts,
         stale_factor=args.stale_factor,

@@ -27,7 +27,7 @@ from typing import Any
 
 from swingrt.errors import ConfigError
 
-__all__ = ["run_on_px4", "STEP_MISSION"]
+__all__ = ["run_on_px4", "STEP_MISSION", "judge_on_truth"]
 
 #: The evaluation flight: hover 2 s, 2 m/s North for 18 s, back to 0 for 10 s, as
 #: (t, vn, ve) steps; the metrics count from the first step to the second.
@@ -240,7 +240,7 @@ def run_on_px4(
     summaries.append(f"flight session: {hil.summary}")
     physics = Trace.from_parquet(out / f"{case}__flights_physics.parquet")
     for tr in traces.values():
-        _judge_on_truth(tr, physics)
+        judge_on_truth(tr, physics)
 
     # 4. report
     rows = []
@@ -342,7 +342,7 @@ def _fly_method(url: str, trained, mission, path, node: dict[str, Any]) -> str |
     return None
 
 
-def _judge_on_truth(node: Any, physics: Any) -> None:
+def judge_on_truth(node: Any, physics: Any) -> None:
     """Put the simulator's true swing into a node log's ``swing_true_*`` (what the metrics
     read), from the physics trace at the node's PX4 time (PX4's clock is the physics'
     clock under ``swingrt hil``): every flight is judged on the payload's own swing, not on

@@ -15,7 +15,8 @@ The loop of one lockstep step (PX4's simulator_mavlink contract):
 4. the loop is paced to wall time / ``speed`` (the offboard node runs on wall time).
 
 With ``takeoff`` the server also arms PX4 and takes off to the scenario's start altitude over
-the GCS link, and calls ``on_ready`` once the vehicle holds there.
+the GCS link, and calls ``on_ready`` once the vehicle holds there; the scenario's payload
+events (``[[payload.events]]``: a winch, a drop) then count from that moment.
 """
 
 from __future__ import annotations
@@ -311,6 +312,9 @@ class HilServer:
             loiter = (PX4_MAIN_MODE["AUTO"], PX4_SUB_MODE_AUTO["LOITER"])
             if self._mode == loiter and self._height >= 0.9 * self.takeoff_altitude:
                 self._enter("done")
+                # A take-off's boot and climb take an unknown time: the payload changes
+                # (a winch, a drop) count from the hold.
+                self.plant.count_payload_events_from(self.plant.t)
                 self.ready = True
                 if self.on_ready is not None:
                     self.on_ready(self)

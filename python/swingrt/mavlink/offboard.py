@@ -919,11 +919,16 @@ class OffboardSession:
 # ----------------------------------------------------------------------------- controllers
 
 
-def load_controller(model_path, settings=None, *, adapt: bool = False, adaptive=None):
+def load_controller(
+    model_path, settings=None, *, adapt: bool = False, adaptive=None, twin: bool = True
+):
     """Build the MPC (``swingrt._core.Mpc``) from a model file, or with ``adapt`` the
     adaptive MPC (``swingrt._core.AdaptiveMpc``, re-synthesis on a worker thread unless
-    ``adaptive`` says otherwise); returns (ctrl, ts, axes)."""
-    from swingrt.sysid import LinearModel
+    ``adaptive`` says otherwise); returns (ctrl, ts, axes). With ``twin`` (default) and a
+    model selected on a vehicle twin (:func:`swingrt.sysid.model_twin`), the adaptive MPC
+    re-identifies on that twin for the cable length it measures in flight (the twin path);
+    without, on the online DMDc alone."""
+    from swingrt.sysid import LinearModel, model_twin
 
     p = Path(model_path)
     model = LinearModel.load(p)
@@ -932,7 +937,15 @@ def load_controller(model_path, settings=None, *, adapt: bool = False, adaptive=
         raise ModelError(f"{p}: model has {axes} inputs; fly supports 1 (North) or 2 (N, E)")
     if adapt:
         opts = {"synthesis": "thread", **(adaptive or {})}
-        return AdaptiveMpc(model, settings, opts), model.dt, axes
+        try:
+            prior = model_twin(model) if twin else None
+        except ModelError as exc:
+            raise ModelError(f"{p}: {exc}") from None
+        if prior is None:
+            return AdaptiveMpc(model, settings, opts), model.dt, axes
+        opts["twin"] = {**opts.get("twin", {}), "enabled": True}
+        vehicle, payload = prior
+        return AdaptiveMpc(model, settings, opts, vehicle, payload), model.dt, axes
     return Mpc(model, settings), model.dt, axes
 
 

@@ -16,6 +16,7 @@
 
 use crate::control::MpcSettings;
 use crate::design::selection::{select_for_control, SelectionSettings};
+use crate::design::twin::TwinPlant;
 use crate::plant::PayloadKind;
 use crate::sim::{Scenario, Simulator};
 use crate::sysid::dmdc::{self, DmdcSettings};
@@ -154,6 +155,20 @@ impl Twin {
         let found = search(&train, &test, &settings).map_err(|e| e.to_string())?;
         let plant = whitebox_model(&train, &template.states, &template.inputs, &settings, mass)
             .map_err(|e| e.to_string())?;
+        let selection_settings = SelectionSettings {
+            plant_label: format!("twin whitebox (payload {mass:.3} kg on {length:.2} m)"),
+            ..SelectionSettings::default()
+        };
+        // The same selection as the model's own, twin flights included: at a long delay
+        // stack the stability screen leaves few ranks, and only the twin's flight vets
+        // the ones it did not screen.
+        let vetting = TwinPlant::new(
+            &self.scenario,
+            &plant,
+            selection_settings.step,
+            template.m(),
+        )
+        .map_err(|e| e.to_string())?;
         let selection = select_for_control(
             &train,
             &test,
@@ -163,11 +178,8 @@ impl Twin {
             &found,
             &plant,
             mpc,
-            &SelectionSettings {
-                plant_label: format!("twin whitebox (payload {mass:.3} kg on {length:.2} m)"),
-                ..SelectionSettings::default()
-            },
-            None,
+            &selection_settings,
+            Some(&vetting),
         )
         .map_err(|e| e.to_string())?;
         if !selection.passed {

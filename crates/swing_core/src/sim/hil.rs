@@ -314,6 +314,26 @@ impl HilPlant {
         self.payload_lifted
     }
 
+    /// Count the scenario's payload events that are still ahead from `origin` [s] of the
+    /// plant's clock on (each one's time plus `origin`): a session that takes off first
+    /// times its payload changes from the moment it holds in the air, which its boot and
+    /// climb make unknown in advance.
+    pub fn count_payload_events_from(&mut self, origin: f64) -> Result<(), SimError> {
+        if !(origin.is_finite() && origin >= 0.0) {
+            return Err(SimError::Config(crate::config::ConfigError::new(
+                "origin",
+                "must be a finite time >= 0 [s]",
+            )));
+        }
+        let now = self.time();
+        for e in self.airborne_model.payload.events.iter_mut() {
+            if e.t >= now {
+                e.t += origin;
+            }
+        }
+        Ok(())
+    }
+
     /// Whether the vehicle stands on the ground.
     pub fn on_ground(&self) -> bool {
         self.state.pos.z >= -1e-9
@@ -821,6 +841,43 @@ mod tests {
         }
         assert!(!p.payload_lifted());
         assert_eq!(p.model().links(), 0);
+    }
+
+    #[test]
+    fn payload_events_counted_from_an_origin_wait_for_it() {
+        use crate::plant::events::{PayloadAction, PayloadEvent};
+        let mut sc = Scenario::builtin("hover").unwrap();
+        sc.payload.length = 1.0;
+        sc.payload.events = vec![PayloadEvent {
+            t: 0.02,
+            action: PayloadAction::Winch,
+            mass: None,
+            length: Some(0.5),
+            rate: Some(1.0),
+        }];
+        let mut p = HilPlant::new(sc, HilSettings::default()).unwrap();
+        let m = p.scenario().vehicle.mass + p.scenario().payload.mass;
+        let cmd = p.scenario().vehicle.command_for_thrust(m * GRAVITY / 4.0);
+        p.state.pos.z = -10.0;
+        p.state.thrust = Vector4::repeat(m * GRAVITY / 4.0);
+        p.payload_lifted = true;
+        p.step([cmd; 4]).unwrap();
+        let origin = p.time();
+        p.count_payload_events_from(origin).unwrap();
+        while p.time() < origin + 0.02 - 1e-9 {
+            p.step([cmd; 4]).unwrap();
+        }
+        assert_eq!(
+            p.airborne_model.payload.length, 1.0,
+            "not yet: 0.02 s after the origin"
+        );
+        while p.time() < origin + 0.12 - 1e-9 {
+            p.step([cmd; 4]).unwrap();
+        }
+        // 0.1 s of winching at 1 m/s.
+        let l = p.airborne_model.payload.length;
+        assert!((l - 0.9).abs() < 0.005, "{l}");
+        assert!(p.count_payload_events_from(f64::NAN).is_err());
     }
 
     #[test]
