@@ -93,12 +93,17 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = ap.parse_args(argv)
 
-    from swingrt.hil.pipeline import SETTLE_S, STEP_DURATION, STEP_MISSION, judge_on_truth
+    from swingrt.hil.pipeline import (
+        SETTLE_S,
+        STEP_DURATION,
+        STEP_MISSION,
+        fly_offboard,
+        judge_on_truth,
+    )
     from swingrt.hil.px4 import check_px4_dir
     from swingrt.hil.session import HilSession
     from swingrt.io.flight import Trace
-    from swingrt.mavlink.link import connect
-    from swingrt.mavlink.offboard import Mission, Watchdog, fly, load_controller
+    from swingrt.mavlink.offboard import Mission, load_controller
     from swingrt.mavlink.training import fly_velocity_mission
     from swingrt.metrics import step_metrics
 
@@ -109,24 +114,6 @@ def main(argv: list[str] | None = None) -> int:
     if not (args.reuse and at_1m.is_file() and at_04m.is_file()):
         at_1m = _train(args.px4, out, "train-1.0m", 1.0, args)
         at_04m = _train(args.px4, out, "train-0.4m", 0.4, args)
-
-    def fly_model(url, ctrl, ts, axes, mission, path):
-        conn = connect(url)
-        try:
-            fly(
-                conn,
-                ctrl,
-                ts=ts,
-                axes=axes,
-                mission=mission,
-                log_path=path,
-                watchdog=Watchdog(ts, swing_limit=math.radians(30.0)),
-            )
-        except Exception as exc:  # noqa: BLE001 - an aborted flight is a result here
-            return f"{type(exc).__name__}: {exc}"
-        finally:
-            conn.close()
-        return None
 
     sc = _scenario(out / "winch.toml", 1.0, winch=True)
     step = Mission(list(STEP_MISSION), STEP_DURATION)
@@ -144,14 +131,16 @@ def main(argv: list[str] | None = None) -> int:
         print("[ px4 ] adaptive MPC (1.0 m model), winch to 0.4 m in hover", file=sys.stderr)
         adaptive, ts, axes = load_controller(at_1m, adapt=True)
         path = out / "mpc_adaptive.parquet"
-        why = fly_model(url, adaptive, ts, axes, Mission(list(ADAPT_MISSION), ADAPT_DURATION), path)
+        mission = Mission(list(ADAPT_MISSION), ADAPT_DURATION)
+        why = fly_offboard(url, adaptive, ts=ts, axes=axes, mission=mission, path=path)
         flights["mpc_adaptive"] = (path, ADAPT_STEP_AT, why)
         for name, model in (("mpc_0.4m", at_04m), ("mpc_fixed_1.0m", at_1m)):
             time.sleep(SETTLE_S)
             print(f"[ px4 ] {name} on the 0.4 m cable", file=sys.stderr)
             ctrl, ts, axes = load_controller(model)
             path = out / f"{name}.parquet"
-            flights[name] = (path, 2.0, fly_model(url, ctrl, ts, axes, step, path))
+            why = fly_offboard(url, ctrl, ts=ts, axes=axes, mission=step, path=path)
+            flights[name] = (path, 2.0, why)
             if name == "mpc_0.4m":
                 time.sleep(SETTLE_S)
                 print("[ px4 ] pid on the 0.4 m cable", file=sys.stderr)

@@ -501,7 +501,7 @@ def select_for_control(
     screened in turn, fly
     the MPC (``mpc_settings``) on the white-box model of the same flight,
     with each of ``vehicle_drag`` [1/s] added and behind each of ``input_lags`` [s]: hover,
-    a ``step`` m/s step, hold (unset settings take the core's defaults: 80 candidates, lags
+    a ``step`` m/s step, hold (unset settings take the core's defaults: 300 candidates, lags
     0 and 0.1 s, drags 0.12 and 0.4 /s, a 2 m/s step); the first within ``bounds``
     (fractions of the step: ``overshoot``, ``final_error``, ``hold_drift``) is taken, else
     the least violating. The

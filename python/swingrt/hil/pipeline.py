@@ -25,9 +25,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from swingrt.errors import ConfigError
+from swingrt.errors import ConfigError, FlightAbort
 
-__all__ = ["run_on_px4", "STEP_MISSION", "judge_on_truth"]
+__all__ = ["run_on_px4", "STEP_MISSION", "fly_offboard", "judge_on_truth"]
 
 #: The evaluation flight: hover 2 s, 2 m/s North for 18 s, back to 0 for 10 s, as
 #: (t, vn, ve) steps; the metrics count from the first step to the second.
@@ -42,6 +42,8 @@ STEP_DURATION = 30.0
 STEP_END = 20.0
 #: Wall seconds to let the payload settle in PX4's hold between two flights.
 SETTLE_S = 12.0
+#: The offboard node's swing watchdog on PX4 [deg]: the last resort of every flight.
+SWING_LIMIT_DEG = 30.0
 
 
 def _say(quiet: bool, text: str) -> None:
@@ -83,8 +85,6 @@ def run_on_px4(
     from swingrt.io.flight import Trace
     from swingrt.mavlink.offboard import (
         Mission,
-        Watchdog,
-        fly,
         load_controller,
         model_body_sensor,
         model_swing_estimator,
@@ -205,24 +205,18 @@ def run_on_px4(
         time.sleep(SETTLE_S)
         _say(quiet, "[ px4 ] mpc: the MPC on the model from PX4's log")
         path = out / f"{case}__mpc.parquet"
-        conn_url = hil.onboard_url
-        from swingrt.mavlink.link import connect
-
-        conn = connect(conn_url)
-        try:
-            fly(
-                conn,
-                controller,
-                ts=ts,
-                axes=axes,
-                mission=mission,
-                log_path=path,
-                watchdog=Watchdog(ts, swing_limit=math.radians(30.0)),
-                swing_estimator=model_swing_estimator(out / f"{case}__model.json"),
-                body_sensor=model_body_sensor(out / f"{case}__model.json"),
-            )
-        finally:
-            conn.close()
+        why = fly_offboard(
+            hil.onboard_url,
+            controller,
+            ts=ts,
+            axes=axes,
+            mission=mission,
+            path=path,
+            swing_estimator=model_swing_estimator(out / f"{case}__model.json"),
+            body_sensor=model_body_sensor(out / f"{case}__model.json"),
+        )
+        if why is not None:
+            raise FlightAbort(f"the MPC's flight on PX4: {why}")
         traces["mpc"] = Trace.from_parquet(path)
         aborted: dict[str, str] = {}
         for name, t in trained.items():
@@ -315,24 +309,24 @@ def _train_methods(methods, data, model, scenario, twin_sc, summaries, quiet) ->
     return trained
 
 
-def _fly_method(url: str, trained, mission, path, node: dict[str, Any]) -> str | None:
-    """Fly one trained method by the offboard node; the reason when the node aborted."""
+def fly_offboard(url: str, ctrl, *, ts: float, axes: int, mission, path, **node: Any) -> str | None:
+    """Fly ``ctrl`` by the offboard node over ``url`` (a fresh link, the 30° swing
+    watchdog, ``node``'s sensor options), logging to ``path``; the reason when the node
+    aborted the flight, else None."""
     from swingrt.errors import FlightAbort
     from swingrt.mavlink.link import connect
     from swingrt.mavlink.offboard import Watchdog, fly
-    from swingrt.methods import controller
 
-    ctrl = controller(trained)
     conn = connect(url)
     try:
         fly(
             conn,
             ctrl,
-            ts=float(ctrl.period),
-            axes=int(ctrl.axes),
+            ts=ts,
+            axes=axes,
             mission=mission,
             log_path=path,
-            watchdog=Watchdog(float(ctrl.period), swing_limit=math.radians(30.0)),
+            watchdog=Watchdog(ts, swing_limit=math.radians(SWING_LIMIT_DEG)),
             **node,
         )
     except FlightAbort as exc:
@@ -340,6 +334,16 @@ def _fly_method(url: str, trained, mission, path, node: dict[str, Any]) -> str |
     finally:
         conn.close()
     return None
+
+
+def _fly_method(url: str, trained, mission, path, node: dict[str, Any]) -> str | None:
+    """Fly one trained method by the offboard node; the reason when the node aborted."""
+    from swingrt.methods import controller
+
+    ctrl = controller(trained)
+    return fly_offboard(
+        url, ctrl, ts=float(ctrl.period), axes=int(ctrl.axes), mission=mission, path=path, **node
+    )
 
 
 def judge_on_truth(node: Any, physics: Any) -> None:
