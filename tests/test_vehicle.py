@@ -34,6 +34,8 @@ def test_the_scenario_comes_back_from_the_parameters_hil_gives_px4(overrides):
     back, notes = vehicle_from_px4(px4_parameters(sc), mass=total)
     b = back.to_dict()
     v, c, bv, bc = d["vehicle"], d["controller"], b["vehicle"], b["controller"]
+    # The payload it hovered with is the base's (0.2 kg), not the 0.3 kg OTHER carried.
+    assert bv["mass"] == pytest.approx(total - 0.2, rel=1e-9)
     assert bv["arm"] == pytest.approx(v["arm"], rel=1e-5)
     assert bv["yaw_arm"] == pytest.approx(v["yaw_arm"], rel=1e-5)
     assert bv["thrust_poly"] == pytest.approx(v["thrust_poly"], rel=2e-3)
@@ -51,20 +53,32 @@ def test_the_scenario_comes_back_from_the_parameters_hil_gives_px4(overrides):
 def test_the_given_mass_hovers_at_px4s_hover_thrust():
     params = px4_parameters(Scenario.builtin("step").with_overrides(OTHER))
     for mass in (0.7, 2.0):
-        sc, _ = vehicle_from_px4(params, mass=mass)
-        payload = sc.to_dict()["payload"]["mass"]
-        # The vehicle alone (its mass less the payload it is carrying) hovers at the
-        # parameter: the motors were scaled to the mass given.
-        alone = sc.with_overrides({"vehicle": {"mass": mass - payload}})
-        assert alone.hover_thrust() == pytest.approx(params["MPC_THR_HOVER"], abs=1e-6)
+        for payload in (None, 0.05, 0.5):
+            sc, _ = vehicle_from_px4(params, mass=mass, payload=payload)
+            d = sc.to_dict()
+            carried = d["payload"]["mass"]
+            assert carried == pytest.approx(0.2 if payload is None else payload)
+            # Vehicle and payload together are the take-off mass, and they hover at the
+            # parameter: the motors were scaled to the mass given.
+            assert d["vehicle"]["mass"] + carried == pytest.approx(mass, rel=1e-12)
+            assert sc.hover_thrust() == pytest.approx(params["MPC_THR_HOVER"], abs=1e-6)
 
 
-def test_without_a_mass_it_is_what_the_nominal_motors_hover_and_says_so():
+def test_without_a_mass_the_vehicle_is_what_the_nominal_motors_hover_less_its_payload():
     sc = Scenario.builtin("step")
-    total = sc.to_dict()["vehicle"]["mass"] + sc.to_dict()["payload"]["mass"]
-    back, notes = vehicle_from_px4(px4_parameters(sc))
-    assert back.to_dict()["vehicle"]["mass"] == pytest.approx(total, rel=1e-3)
+    params = px4_parameters(sc)
+    back, notes = vehicle_from_px4(params)
+    # The round trip: the built-in vehicle hovers its 0.2 kg at MPC_THR_HOVER, and the
+    # vehicle read back is the built-in one, not vehicle and payload together.
+    assert back.to_dict()["vehicle"]["mass"] == pytest.approx(
+        sc.to_dict()["vehicle"]["mass"], rel=1e-3
+    )
+    assert back.hover_thrust() == pytest.approx(params["MPC_THR_HOVER"], abs=1e-6)
     assert any("estimated" in n for n in notes)
+    # A payload as heavy as the take-off mass leaves no vehicle.
+    with pytest.raises(ConfigError) as e:
+        vehicle_from_px4(params, payload=5.0)
+    assert e.value.field == "payload"
 
 
 def _params(**changes):
@@ -144,15 +158,16 @@ def test_cli_writes_a_scenario_that_flies(cli, tmp_path):
     params = px4_parameters(Scenario.builtin("step").with_overrides(OTHER))
     src.write_text("".join(f"1\t1\t{k}\t{v}\t9\n" for k, v in params.items()))
     out = tmp_path / "v.toml"
-    r = cli("vehicle", src, "--mass", "1.7", "-o", out)
+    r = cli("vehicle", src, "--mass", "1.7", "--payload", "0.3", "-o", out)
     assert r.returncode == 0, r.stderr
     sc = Scenario.from_toml(out.read_text())
-    assert sc.to_dict()["vehicle"]["mass"] == 1.7
+    assert sc.to_dict()["vehicle"]["mass"] == pytest.approx(1.4)
+    assert sc.to_dict()["payload"]["mass"] == pytest.approx(0.3)
     assert math.isclose(sc.to_dict()["vehicle"]["arm"], 0.25, rel_tol=1e-5)
     assert "nominal" in r.stderr and "nominal" in out.read_text()
     r = cli("simulate", out, "--duration", "6", "-o", tmp_path / "t.parquet")
     assert r.returncode == 0, r.stderr
-    for args in (["--mass", "-1"], ["-o", tmp_path / "v.json"]):
+    for args in (["--mass", "-1"], ["--payload", "2"], ["-o", tmp_path / "v.json"]):
         r = cli("vehicle", src, *args)
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
     r = cli("vehicle", tmp_path / "missing.params")

@@ -485,6 +485,7 @@ def select_for_control(
     axes: str = "n",
     mpc_settings: Mapping[str, Any] | None = None,
     candidates: int | None = None,
+    passers: int | None = None,
     input_lags: Sequence[float] | None = None,
     vehicle_drag: Sequence[float] | None = None,
     step: float | None = None,
@@ -502,9 +503,9 @@ def select_for_control(
     the MPC (``mpc_settings``) on the white-box model of the same flight,
     with each of ``vehicle_drag`` [1/s] added and behind each of ``input_lags`` [s]: hover,
     a ``step`` m/s step, hold (unset settings take the core's defaults: 300 candidates, lags
-    0 and 0.1 s, drags 0.12 and 0.4 /s, a 2 m/s step); the first within ``bounds``
-    (fractions of the step: ``overshoot``, ``final_error``, ``hold_drift``) is taken, else
-    the least violating. The
+    0 and 0.1 s, drags 0.12 and 0.4 /s, a 2 m/s step); one within ``bounds`` (fractions of
+    the step: ``overshoot``, ``final_error``, ``hold_drift``) passes, else the least
+    violating is taken. The
     outcome is in ``model.diagnostics['control_check']``. ``settings`` override the
     search's identification settings.
 
@@ -519,9 +520,11 @@ def select_for_control(
     settles there too then holds the step on the twin for 60 s, with the noise and without:
     what the noise alone does to its velocity (``wander``, the RMS of the 2 s mean
     difference) and its largest error over the last 20 s without noise (``late_error``: a
-    slowly growing oscillation) are bounded, as fractions of the step. Of those that settle,
-    the first whose swing excess stays within ``swing_vs_pid`` of PX4's own on the same step
-    (or below ``swing_excess_min`` deg·s) is taken, else the one that swings least. A
+    slowly growing oscillation) are bounded, as fractions of the step. One that settles and
+    whose swing excess stays within ``swing_vs_pid`` of PX4's own on the same step (or below
+    ``swing_excess_min`` deg·s) passes; of the first ``passers`` that pass, the one
+    that swings least on the twin is taken (ties to the lower NMAE), else the one of all
+    that settled that swings least. A
     candidate whose hold wanders more than ``noise_retry_wander`` is checked again with its
     MPC's Kalman measurement noise raised ``noise_retry`` times; when that does better, the
     model carries the raised noise (``diagnostics['measurement_noise']``) and every MPC
@@ -536,6 +539,7 @@ def select_for_control(
     # Unset selection settings take the core's defaults (``SelectionSettings``): one home.
     given = {
         "candidates": candidates,
+        "passers": passers,
         "input_lags": None if input_lags is None else list(input_lags),
         "vehicle_drag": None if vehicle_drag is None else list(vehicle_drag),
         "step": step,

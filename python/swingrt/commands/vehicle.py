@@ -24,8 +24,15 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "--mass",
         type=float,
         metavar="KG",
-        help="vehicle mass; the motors are scaled so that it hovers at MPC_THR_HOVER "
-        "(default: the mass the nominal motors hover there, stated)",
+        help="take-off mass (vehicle and payload); the motors are scaled so that it hovers "
+        "at MPC_THR_HOVER (default: the mass the nominal motors hover there, stated)",
+    )
+    p.add_argument(
+        "--payload",
+        type=float,
+        metavar="KG",
+        help="payload the vehicle hovered with at MPC_THR_HOVER; the vehicle is the take-off "
+        "mass less it (default: the default payload, 0.2 kg)",
     )
     p.add_argument("-o", "--output", default="vehicle.toml", help="scenario TOML to write")
     return p
@@ -40,7 +47,7 @@ def run(args) -> int:
     from swingrt.io.px4_params import read_px4_parameters
 
     params = read_px4_parameters(args.source)
-    sc, notes = vehicle_from_px4(params, mass=args.mass)
+    sc, notes = vehicle_from_px4(params, mass=args.mass, payload=args.payload)
     header = [f"# The vehicle of {args.source}, read by swingrt vehicle from PX4's parameters."]
     header += [f"# {n}" for n in notes]
     write_text_atomic(args.output, "\n".join(header) + "\n" + sc.to_toml())

@@ -159,16 +159,24 @@ _X_TOLERANCE = 0.05
 
 
 def vehicle_from_px4(
-    params: dict[str, float], *, mass: float | None = None, base: Scenario | None = None
+    params: dict[str, float],
+    *,
+    mass: float | None = None,
+    payload: float | None = None,
+    base: Scenario | None = None,
 ) -> tuple[Scenario, list[str]]:
     """The scenario of the vehicle PX4's ``params`` describe, and what it could not know.
 
     Read: the rotor geometry of the control allocation (a quad X in PX4's rotor order: the
     rotors' |x|, |y| and yaw moment ratio), the cascade's gains, rates and limits
     (:data:`PX4_CONTROLLER`; the North/East velocity gains are PX4's one horizontal gain),
-    and the hover thrust ``MPC_THR_HOVER``: with ``mass`` [kg] given, the motors' thrust
-    curve is the nominal one scaled so that this mass hovers there; without, the mass is the
-    one the nominal curve hovers there (stated). Not in PX4's parameters and left nominal
+    and the hover thrust ``MPC_THR_HOVER``: with the take-off ``mass`` [kg] given, the motors'
+    thrust curve is the nominal one scaled so that this mass hovers there; without, the
+    take-off mass is the one the nominal curve hovers there (stated). The hover thrust holds
+    the vehicle and the ``payload`` [kg] it carried (PX4's hover-thrust estimate learns both;
+    by default ``base``'s payload): the scenario carries that payload and its vehicle is the
+    take-off mass less it, so a twin that swaps in another payload does not carry this one
+    too. Not in PX4's parameters and left nominal
     (``base``'s, the built-in Honeybee by default), stated: the drag, the motor lag, the
     loop rates; the
     inertia is the nominal one scaled with the mass and the arm squared."""
@@ -204,21 +212,33 @@ def vehicle_from_px4(
             field="MPC_THR_HOVER",
         )
     nominal = _mass_hovering_at(base, float(hover))
+    carried = _payload(base, payload)
     if mass is None:
-        vehicle["mass"] = nominal
+        takeoff = nominal
         notes.append(
-            f"mass {nominal:.3f} kg estimated: what the nominal motors hover at "
+            f"take-off mass {nominal:.3f} kg estimated: what the nominal motors hover at "
             f"MPC_THR_HOVER {hover:g} (give --mass: the motors are then scaled to it)"
         )
     else:
         if not (math.isfinite(mass) and mass > 0.0):
             raise ConfigError(f"mass must be a positive number of kg, not {mass}", field="mass")
-        vehicle["mass"] = float(mass)
+        takeoff = float(mass)
         vehicle["thrust_poly"] = [c * mass / nominal for c in vehicle["thrust_poly"]]
         notes.append(
             f"motors: the nominal thrust curve x {mass / nominal:.3f}, so that {mass:g} kg "
             f"hovers at MPC_THR_HOVER {hover:g}"
         )
+    if not takeoff > sum(carried.values()):
+        raise ConfigError(
+            f"payload: {sum(carried.values()):g} kg leaves no vehicle of the take-off mass "
+            f"{takeoff:.3f} kg",
+            field="payload",
+        )
+    vehicle["mass"] = takeoff - sum(carried.values())
+    notes.append(
+        f"vehicle {vehicle['mass']:.3f} kg: the take-off mass less the "
+        f"{sum(carried.values()):.3f} kg payload it hovered with"
+    )
     m0, d0 = float(b["vehicle"]["mass"]), float(b["vehicle"]["arm"])
     scale = vehicle["mass"] / m0 * (arm / d0) ** 2
     vehicle["inertia"] = [i * scale for i in b["vehicle"]["inertia"]]
@@ -226,8 +246,25 @@ def vehicle_from_px4(
         f"inertia nominal x {scale:.3f} (mass x arm^2); drag, motor lag "
         f"{vehicle['motor_tau'] * 1e3:.0f} ms and loop rates nominal: not in PX4's parameters"
     )
-    sc = base.with_overrides({"vehicle": vehicle, "controller": controller})
+    sc = base.with_overrides({"vehicle": vehicle, "controller": controller, "payload": carried})
     return sc, notes
+
+
+def _payload(base: Scenario, payload: float | None) -> dict[str, float]:
+    """The payload masses [kg] of ``base`` (``mass``, and ``mass2`` of a double pendulum),
+    scaled to a total of ``payload`` when given."""
+    d = base.to_dict()["payload"]
+    masses = {"mass": float(d["mass"])}
+    if d["kind"] == "double":
+        masses["mass2"] = float(d["mass2"])
+    if payload is None:
+        return masses
+    if not (math.isfinite(payload) and payload > 0.0):
+        raise ConfigError(
+            f"payload must be a positive number of kg, not {payload}", field="payload"
+        )
+    scale = payload / sum(masses.values())
+    return {k: m * scale for k, m in masses.items()}
 
 
 def _quad_x(params: dict[str, float]) -> tuple[tuple[float, float], float, list[str]]:

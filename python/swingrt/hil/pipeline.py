@@ -173,7 +173,14 @@ def run_on_px4(
         from swingrt.hil.params import vehicle_from_px4
         from swingrt.io.px4_params import read_px4_parameters
 
-        twin_sc, twin_notes = vehicle_from_px4(read_px4_parameters(ulog))
+        # PX4's hover thrust holds the payload too: the twin's vehicle is the take-off
+        # mass less the payload the white-box estimates, which the twin then carries.
+        plant, _ = sysid.check_plant(
+            data, result, settings=sysid.identify_settings(**result.settings)
+        )
+        wb = plant.diagnostics.get("whitebox")
+        carried = float(wb["payload_mass"]) if isinstance(wb, dict) else None
+        twin_sc, twin_notes = vehicle_from_px4(read_px4_parameters(ulog), payload=carried)
         summaries.append(
             "twin of the model selection: the vehicle of PX4's parameters in its ULog ("
             + "; ".join(twin_notes)
