@@ -2,15 +2,16 @@
 on flights where many candidates must be flown, against another swingrt for comparison.
 
 The flights are samples of the robustness campaign (``examples/campaigns/robustness.toml``)
-whose payload is a double pendulum with swing-sensor noise: 201 (0.0097 rad, 29 candidates
-flown) and 42 (0.0055 rad, 24). Each is identified with the twin ``identify`` flies by
-default (the built-in vehicle) and with the exact airframe as a campaign's ``twin = "exact"``
-does. For each, prints the number of candidates flown, the model chosen and the median wall
-time over ``--repeat`` runs; with ``--baseline DIR`` (the ``python`` directory of another
-checkout, its ``_core`` built) the same runs in a subprocess on that swingrt, the ratio of
-the medians, and whether both chose the same model with the same figures (relative 1e-6).
-Run it under ``taskset -c 0`` for the one-core figure (the selection flies independent
-checks side by side on the cores it may use). Exit status 1 when the choices differ.
+whose payload is a double pendulum with swing-sensor noise: 201 (0.0097 rad, the first
+candidate that passes is the 29th) and 42 (0.0055 rad, the 24th). Each is identified with
+the twin ``identify`` flies by default (the built-in vehicle) and with the exact airframe as
+a campaign's ``twin = "exact"`` does. For each, prints the number of candidates flown, the
+model chosen and the median wall time over ``--repeat`` runs; with ``--baseline DIR`` (the
+``python`` directory of another checkout, its ``_core`` built) the same runs in a
+subprocess on that swingrt, the ratio of the medians, and whether both chose the same model
+with the same figures (relative 1e-6). Run it under ``taskset -c 0`` for the one-core
+figure (the selection flies independent checks side by side on the cores it may use). Exit
+status 1 when the choices differ.
 
     python benches/selection_speed.py [--repeat 5] [--samples 201 42] [--baseline DIR]
 """

@@ -717,8 +717,8 @@ def test_the_twin_step_flight_rejects_a_model_that_does_not_damp_the_swing():
     """Campaign sample 234 (0.38 kg on 0.54 m): without the swing bound, taking the first
     candidate that settles on the twin, the vehicle moves but keeps most of PX4's swing (in
     flight, more than 0.4 of PID's swing excess); with it, the pick damps the swing on the
-    twin and in flight; so does the default choice, the least swing of five that pass, with
-    no bound."""
+    twin and in flight; so does the default selection, and without the bound the least
+    swing of five that pass, looking far enough for them."""
     train, train_sc, ev = _campaign_sample(234)
     result = sysid.search(train)
     pid = _fly(ev, controller="pid")["swing_excess_iae_deg_s"]
@@ -732,17 +732,25 @@ def test_the_twin_step_flight_rejects_a_model_that_does_not_damp_the_swing():
     assert chosen["twin"]["swing_excess"] <= cc["twin"]["swing_bound"], chosen
     # Candidates that settled but swung are on record, not taken.
     assert any(c["settled"] and not c["passed"] for c in cc["checked"]), cc["checked"]
-    # Without the bound but with the default choice (of the first five that pass, the one
-    # that swings least on the twin), the cost alone finds a model that damps.
+    # Without the bound, the cost alone (of the first five that pass, the one that swings
+    # least on the twin) finds a model that damps when it may look far enough: here the
+    # five span more than the default ten candidates past the first.
     cheapest = sysid.select_for_control(
-        train, result, twin=train_sc, twin_bounds={"swing_vs_pid": 100.0}
+        train, result, twin=train_sc, twin_bounds={"swing_vs_pid": 100.0}, look_ahead=300
     )
     assert "swings least" in cheapest.model.diagnostics["control_check"]["pick"]
+    default = sysid.select_for_control(train, result, twin=train_sc)
     swing = {
         name: _fly(ev, sel.model)["swing_excess_iae_deg_s"] / pid
-        for name, sel in [("loose", loose), ("bound", picked), ("cheapest", cheapest)]
+        for name, sel in [
+            ("loose", loose),
+            ("bound", picked),
+            ("cheapest", cheapest),
+            ("default", default),
+        ]
     }
     assert swing["loose"] > 0.4 and swing["bound"] < 0.2 and swing["cheapest"] < 0.2, swing
+    assert swing["default"] < 0.2, swing
 
 
 def test_the_twin_hold_flight_bounds_what_the_sensor_noise_does_to_the_velocity():
@@ -765,6 +773,11 @@ def test_the_twin_hold_flight_bounds_what_the_sensor_noise_does_to_the_velocity(
     assert all(c["hold"]["wander"] <= bound for c in held if c["settled"]), held
     # Candidates turned away for what the noise made of their velocity are on record.
     assert any(c["hold"]["wander"] > bound and not c["settled"] for c in held), held
+    # Few pass here: the search stops `look_ahead` candidates past the first that passed,
+    # not at the budget of 300.
+    passed = [i for i, c in enumerate(cc["checked"]) if c["passed"]]
+    assert len(passed) < cc["passers"], passed
+    assert len(cc["checked"]) == passed[0] + 1 + cc["look_ahead"], (passed, len(cc["checked"]))
     ss = {
         name: _fly(ev, sel.model)["ss_error"] for name, sel in [("loose", loose), ("bound", picked)]
     }
@@ -839,3 +852,50 @@ def test_the_twin_carries_the_second_link_found_in_the_swing():
     assert "double pendulum" in cc["twin"]["plant"], cc["twin"]
     flight = _fly(ev, picked.model)
     assert flight["v_settle_s"] < 6.0 and flight["ss_error"] < 0.02, flight
+
+
+def _lagged_flight(tau: float, dt: float = 0.02, n: int = 4000) -> tuple[np.ndarray, ...]:
+    """An axis of a flight whose acceleration is a command behind an exact first-order lag
+    ``tau`` (zero-order hold), with drag, a swing's pull and a constant beside it."""
+    rng = np.random.default_rng(5)
+    u = np.repeat(rng.uniform(-3.0, 3.0, n // 40 + 1), 40)[:n]
+    theta = 0.08 * np.sin(2.1 * dt * np.arange(n))
+    alpha = math.exp(-dt / tau) if tau > 0 else 0.0
+    share = tau * (1 - alpha) / dt if tau > 0 else 0.0
+    v, f = np.zeros(n), u[0]
+    for k in range(n - 1):
+        acc = u[k] + (f - u[k]) * share
+        v[k + 1] = v[k] + dt * (acc - 0.2 * v[k] - 1.1 * theta[k] + 0.03)
+        f = alpha * f + (1 - alpha) * u[k]
+    return v, theta, u
+
+
+def test_the_attitude_lag_is_read_from_the_command_against_the_acceleration():
+    """The lag the selection flies behind and the NMPC predicts with (one fit, in the core):
+    a flight whose acceleration follows the command through a known lag, with drag and a
+    swing's pull beside it, gives that lag back; a flight that cannot tell it gives none."""
+    from swingrt.methods.nmpc import estimate_lag
+
+    for tau in (0.0, 0.08, 0.165, 0.3):
+        v, theta, u = _lagged_flight(tau)
+        assert _core.sysid_attitude_lag(v, theta, u, 0.02) == pytest.approx(tau, abs=1e-9)
+        assert estimate_lag(v, theta, u, 0.02) == pytest.approx(tau, abs=1e-9)
+    v, theta, u = _lagged_flight(0.1)
+    assert _core.sysid_attitude_lag(v, theta, np.ones_like(u), 0.02) is None
+    with pytest.raises(DataError, match="swing has 10 samples"):
+        _core.sysid_attitude_lag(v, theta[:10], u, 0.02)
+
+
+def test_the_white_box_carries_the_lag_of_the_flight_and_the_check_flies_behind_it():
+    """A training flight of the built-in vehicle (PX4's cascade): the white-box reads an
+    attitude lag between 0.1 and 0.25 s from it, and with ``flight_lag`` the control check
+    flies its linear plants behind that lag as well as behind 0 and 0.1 s."""
+    train, _ = _grid_case("mp0.2_l0.5")
+    result = sysid.search(train)
+    plant, _ = sysid.check_plant(train, result, settings=result.settings)
+    lag = plant.diagnostics["whitebox"]["attitude_lag"]
+    assert 0.1 < lag < 0.25, lag
+    flown = sysid.select_for_control(train, result, twin=None, flight_lag=True)
+    assert flown.model.diagnostics["control_check"]["input_lags"] == [0.0, 0.1, lag]
+    fixed = sysid.select_for_control(train, result, twin=None)
+    assert fixed.model.diagnostics["control_check"]["input_lags"] == [0.0, 0.1]

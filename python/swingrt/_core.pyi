@@ -48,6 +48,7 @@ __all__ = [
     "swing_iae",
     "swing_mode",
     "swing_scale_fit",
+    "sysid_attitude_lag",
     "sysid_cable_length",
     "sysid_fft_peak",
     "sysid_rls_mass",
@@ -313,6 +314,12 @@ def sysid_fft_peak(
 def sysid_cable_length(
     freq_hz: float, vehicle_mass: float, payload_mass: float, gravity: float = ...
 ) -> float: ...
+def sysid_attitude_lag(
+    velocity: npt.NDArray[np.float64],
+    swing: npt.NDArray[np.float64],
+    command: npt.NDArray[np.float64],
+    dt: float,
+) -> float | None: ...
 def sysid_rls_mass(
     thrust_vertical: npt.NDArray[np.float64],
     acc_down: npt.NDArray[np.float64],

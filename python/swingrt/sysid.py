@@ -486,7 +486,9 @@ def select_for_control(
     mpc_settings: Mapping[str, Any] | None = None,
     candidates: int | None = None,
     passers: int | None = None,
+    look_ahead: int | None = None,
     input_lags: Sequence[float] | None = None,
+    flight_lag: bool | None = None,
     vehicle_drag: Sequence[float] | None = None,
     step: float | None = None,
     bounds: Mapping[str, float] | None = None,
@@ -494,6 +496,7 @@ def select_for_control(
     twin_bounds: Mapping[str, float] | None = None,
     noise_retry: float | None = None,
     noise_retry_wander: float | None = None,
+    check: tuple[LinearModel, str] | None = None,
     **settings: Any,
 ) -> SearchResult:
     """Pick from a search the model to fly an MPC on (control-relevant selection, see
@@ -503,7 +506,10 @@ def select_for_control(
     the MPC (``mpc_settings``) on the white-box model of the same flight,
     with each of ``vehicle_drag`` [1/s] added and behind each of ``input_lags`` [s]: hover,
     a ``step`` m/s step, hold (unset settings take the core's defaults: 300 candidates, lags
-    0 and 0.1 s, drags 0.12 and 0.4 /s, a 2 m/s step); one within ``bounds`` (fractions of
+    0 and 0.1 s, drags 0.12 and 0.4 /s, a 2 m/s step), and with ``flight_lag`` (off by
+    default) also behind the attitude lag the flight shows (``diagnostics['whitebox']
+    ['attitude_lag']``: the acceleration command against the measured acceleration); one
+    within ``bounds`` (fractions of
     the step: ``overshoot``, ``final_error``, ``hold_drift``) passes, else the least
     violating is taken. The
     outcome is in ``model.diagnostics['control_check']``. ``settings`` override the
@@ -522,25 +528,29 @@ def select_for_control(
     difference) and its largest error over the last 20 s without noise (``late_error``: a
     slowly growing oscillation) are bounded, as fractions of the step. One that settles and
     whose swing excess stays within ``swing_vs_pid`` of PX4's own on the same step (or below
-    ``swing_excess_min`` deg·s) passes; of the first ``passers`` that pass, the one
-    that swings least on the twin is taken (ties to the lower NMAE), else the one of all
-    that settled that swings least. A
+    ``swing_excess_min`` deg·s) passes; of the first ``passers`` that pass, looking at most
+    ``look_ahead`` candidates past the first that passes, the one that swings least on the
+    twin is taken (ties to the lower NMAE), else the one of all that settled that swings
+    least. A
     candidate whose hold wanders more than ``noise_retry_wander`` is checked again with its
     MPC's Kalman measurement noise raised ``noise_retry`` times; when that does better, the
     model carries the raised noise (``diagnostics['measurement_noise']``) and every MPC
     built on it assumes at least that. Without a white-box (a model-only check) the twin is
     not flown. A flight identified on the IMU's swing estimate (:func:`swing_source`) flies
     the twin on the same estimate (its ``sensors`` set to the flight's swing source and
-    estimator)."""
+    estimator). ``check`` is :func:`check_plant`'s answer when the caller already has it
+    (it is built from the same flight and settings otherwise)."""
     if result.search is None:
         raise ConfigError("result: not from a search (no candidates to check)", field="result")
     s = identify_settings(**{**result.settings, **settings})
-    plant, label = check_plant(data, result, axes=axes, settings=s)
+    plant, label = check or check_plant(data, result, axes=axes, settings=s)
     # Unset selection settings take the core's defaults (``SelectionSettings``): one home.
     given = {
         "candidates": candidates,
         "passers": passers,
+        "look_ahead": look_ahead,
         "input_lags": None if input_lags is None else list(input_lags),
+        "flight_lag": flight_lag,
         "vehicle_drag": None if vehicle_drag is None else list(vehicle_drag),
         "step": step,
         "bounds": None if bounds is None else dict(bounds),

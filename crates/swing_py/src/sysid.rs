@@ -17,7 +17,7 @@ use swing_core::plant::GRAVITY;
 use swing_core::sysid::metrics::rollout_nmae;
 use swing_core::sysid::pipeline::{self, candidate_row, ThrustLog};
 use swing_core::sysid::search::SearchResult;
-use swing_core::sysid::{smooth, whitebox, IdentifySettings, LinearModel, Trajectory};
+use swing_core::sysid::{lag, smooth, whitebox, IdentifySettings, LinearModel, Trajectory};
 use swing_core::Category;
 
 use crate::convert::{array1, array2, cols, data_err, from_py, to_py_object};
@@ -592,6 +592,34 @@ fn sysid_rls_mass<'py>(
     Ok(PyArray1::from_vec(py, out))
 }
 
+/// The attitude loop's lag [s] from one axis of a flight sampled every `dt` s: velocity,
+/// swing and acceleration command (`swing_core::sysid::lag`); None when the flight does
+/// not tell it.
+#[pyfunction]
+fn sysid_attitude_lag(
+    velocity: &Bound<'_, PyAny>,
+    swing: &Bound<'_, PyAny>,
+    command: &Bound<'_, PyAny>,
+    dt: f64,
+) -> PyResult<Option<f64>> {
+    let (v, th, u) = (
+        array1(velocity, "velocity")?,
+        array1(swing, "swing")?,
+        array1(command, "command")?,
+    );
+    let (v, th, u) = (v.as_slice()?, th.as_slice()?, u.as_slice()?);
+    if th.len() != v.len() {
+        return Err(data_err(format!(
+            "swing has {} samples, velocity {}",
+            th.len(),
+            v.len()
+        )));
+    }
+    let x: Vec<f64> = v.iter().zip(th).flat_map(|(a, b)| [*a, *b]).collect();
+    let train = Trajectory::new(&x, 2, u, 1).map_err(to_py)?;
+    Ok(lag::attitude_lag(&train, 1, dt).map(|fit| fit.tau))
+}
+
 /// Quadratic-regression smoothing (thesis 4.6.6, states).
 #[pyfunction]
 fn sysid_smooth_quadratic<'py>(
@@ -628,6 +656,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sysid_fft_peak, m)?)?;
     m.add_function(wrap_pyfunction!(sysid_cable_length, m)?)?;
     m.add_function(wrap_pyfunction!(sysid_rls_mass, m)?)?;
+    m.add_function(wrap_pyfunction!(sysid_attitude_lag, m)?)?;
     m.add_function(wrap_pyfunction!(sysid_smooth_quadratic, m)?)?;
     m.add_function(wrap_pyfunction!(sysid_smooth_gaussian, m)?)?;
     Ok(())

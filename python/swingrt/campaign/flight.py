@@ -47,7 +47,15 @@ SWING_EXCESS_RATIO = 0.4
 SWING_EXCESS_MIN = 1.0
 
 #: Identification columns of a row.
-IDENT_COLUMNS = ("q", "p", "test_nmae", "control_check_passed", "wb_payload_mass", "wb_length")
+IDENT_COLUMNS = (
+    "q",
+    "p",
+    "test_nmae",
+    "control_check_passed",
+    "wb_payload_mass",
+    "wb_length",
+    "wb_attitude_lag",
+)
 #: The swing IAE's excess above its momentum floor (a ``metrics.csv`` column).
 EXCESS = "swing_excess_iae_deg_s"
 #: The swing IAE excess over PID's in the same sample (NaN when PID is not flown).
@@ -85,6 +93,12 @@ def param_columns(values: dict[str, Any]) -> dict[str, Any]:
         else:
             out[k] = _cell(v)
     return out
+
+
+def _attitude_lag(whitebox: Any) -> float | None:
+    """The attitude lag [s] the white-box read from the training flight, if it told one."""
+    lag = whitebox.diagnostics.get("whitebox", {}).get("attitude_lag")
+    return None if lag is None else float(lag)
 
 
 def _fatal(exc: BaseException) -> bool:
@@ -169,6 +183,7 @@ def fly_sample(
                 "control_check_passed": None if cc is None else bool(cc.get("passed", True)),
                 "wb_payload_mass": None if lqr is None else lqr["m_p"],
                 "wb_length": None if lqr is None else lqr["l"],
+                "wb_attitude_lag": None if wb is None else _attitude_lag(wb),
             }
             if out is not None:
                 train.to_parquet(out / "training.parquet")

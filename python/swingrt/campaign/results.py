@@ -35,6 +35,7 @@ _TYPES = {
     "control_check_passed": "bool",
     "wb_payload_mass": "float64",
     "wb_length": "float64",
+    "wb_attitude_lag": "float64",
     "fallback": "string",
     "error": "string",
     "failure": "string",

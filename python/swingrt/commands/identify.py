@@ -168,7 +168,9 @@ def run(args) -> int:
     line = f"{model.method}: q = {model.delays}, p = {model.rank}, test NMAE {score}"
     wb = model.diagnostics.get("whitebox")
     if wb:
-        line += f" (m_p {wb['payload_mass']:.3f} kg, l {wb['length']:.3f} m)"
+        lag = wb.get("attitude_lag")
+        shown = "" if lag is None else f", attitude lag {lag:.3f} s"
+        line += f" (m_p {wb['payload_mass']:.3f} kg, l {wb['length']:.3f} m{shown})"
     print(line)
     if args.plots:
         out = Path(args.plots)

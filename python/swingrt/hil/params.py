@@ -307,8 +307,7 @@ def _mass_hovering_at(base: Scenario, hover: float) -> float:
     """The total mass [kg] ``base``'s motors hold at the normalised ``hover`` thrust (the
     core's inverse of its hover thrust), refused when the vehicle left under the payload it
     carries would not be one the motors can fly."""
-    d = base.to_dict()["payload"]
-    payload = float(d["mass"]) + (float(d.get("mass2", 0.0)) if d["kind"] == "double" else 0.0)
+    payload = sum(_payload(base, None).values())
     total = base.mass_hovering_at(hover)
     try:
         if not total > payload:

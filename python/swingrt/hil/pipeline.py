@@ -169,16 +169,15 @@ def run_on_px4(
     data.to_parquet(out / f"{case}__training.parquet")
     result = sysid.search(data)
     twin_sc = None
+    check = None
     if twin:
         from swingrt.hil.params import vehicle_from_px4
         from swingrt.io.px4_params import read_px4_parameters
 
         # PX4's hover thrust holds the payload too: the twin's vehicle is the take-off
         # mass less the payload the white-box estimates, which the twin then carries.
-        plant, _ = sysid.check_plant(
-            data, result, settings=sysid.identify_settings(**result.settings)
-        )
-        wb = plant.diagnostics.get("whitebox")
+        check = sysid.check_plant(data, result, settings=sysid.identify_settings(**result.settings))
+        wb = check[0].diagnostics.get("whitebox")
         carried = float(wb["payload_mass"]) if isinstance(wb, dict) else None
         twin_sc, twin_notes = vehicle_from_px4(read_px4_parameters(ulog), payload=carried)
         summaries.append(
@@ -186,7 +185,7 @@ def run_on_px4(
             + "; ".join(twin_notes)
             + ")"
         )
-    result = sysid.select_for_control(data, result, twin=twin_sc)
+    result = sysid.select_for_control(data, result, twin=twin_sc, check=check)
     model = result.model
     model.save(out / f"{case}__model.json")
     plot_pareto(result, out / f"{case}__error_vs_delays.png")

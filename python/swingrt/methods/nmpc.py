@@ -165,23 +165,18 @@ def pendulum_dynamics(m_q: float, m_p: float, l: float, c: float) -> Callable[[A
     return f
 
 
-def estimate_lag(
-    v: np.ndarray, swing: np.ndarray, u: np.ndarray, dt: float, grid: np.ndarray | None = None
-) -> float:
-    """The attitude loop's lag τ [s] from a flight at sample time ``dt``: for each τ of
-    ``grid`` the setpoint u is low-passed (a⁺ = a + α(u − a)) and the velocity increments
-    are regressed on [a, θ, 1] (the eq. 5.7 velocity row); the τ with the smallest residual
-    is taken."""
-    grid = np.arange(0.0, 0.301, 0.01) if grid is None else grid
-    dv = np.diff(v) / dt
-    best, best_res = 0.0, math.inf
-    for tau in grid:
-        x = np.column_stack([lagged(u, dt, tau)[:-1], swing[:-1], np.ones(len(dv))])
-        coef, *_ = np.linalg.lstsq(x, dv, rcond=None)
-        res = float(np.sum((x @ coef - dv) ** 2))
-        if res < best_res:
-            best, best_res = float(tau), res
-    return best
+def estimate_lag(v: np.ndarray, swing: np.ndarray, u: np.ndarray, dt: float) -> float:
+    """The attitude loop's lag τ [s] from one axis of a flight at sample time ``dt``: the
+    core's fit (``swing_core::sysid::lag``, the one the model selection flies behind), the
+    velocity's increments regressed on the lagged setpoint u with drag, the swing's pull and
+    a constant beside it; 0 (no lag in the prediction) when the flight does not tell it."""
+    from swingrt import _core
+
+    def column(x: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(x, dtype=float)
+
+    tau = _core.sysid_attitude_lag(column(v), column(swing), column(u), dt)
+    return 0.0 if tau is None else float(tau)
 
 
 def lagged(u: np.ndarray, dt: float, tau: float) -> np.ndarray:

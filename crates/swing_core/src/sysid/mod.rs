@@ -8,6 +8,7 @@ pub mod error;
 mod gram;
 pub mod hankel;
 pub mod havokc;
+pub mod lag;
 pub mod links;
 pub mod metrics;
 pub mod model;

@@ -98,6 +98,11 @@ pub struct WhiteboxEstimates {
     /// training swing (`whitebox::noise_std`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub swing_noise: Option<f64>,
+    /// The attitude loop as a first-order lag from the acceleration command to the
+    /// vehicle's acceleration [s], fitted to the training flight (`sysid::lag`), when the
+    /// flight tells it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub attitude_lag: Option<f64>,
 }
 
 /// Diagnostics stored with a model.

@@ -285,6 +285,7 @@ pub fn whitebox_model(
         let j = (axes..2 * axes).next().expect("at least one axis");
         let swing: Vec<f64> = (0..train.len).map(|k| train.state(k)[j]).collect();
         wb.swing_noise = whitebox::noise_std(&swing);
+        wb.attitude_lag = super::lag::attitude_lag(train, axes, settings.dt).map(|fit| fit.tau);
     }
     let mut model = named(model, states, inputs)?;
     whitebox::apply_offset(&mut model, train, settings.offset)?;

@@ -256,6 +256,7 @@ pub fn model(
         links: None,
         fft_length: None,
         swing_noise: None,
+        attitude_lag: None,
     });
     Ok(out)
 }

@@ -125,11 +125,11 @@ impl Synthesizer {
         )
         .map_err(|e| e.to_string())?;
         *check_out = Some(worst);
-        if !self.settings.bounds.admit(&worst) {
-            return Err(format!(
-                "closed-loop check failed: overshoot {:.3}, final error {:.3}, hold drift {:.3}",
-                worst.overshoot, worst.final_error, worst.hold_drift
-            ));
+        // The same requirements and refusals as the offline selection's linear plants.
+        let refusals = self.settings.bounds.refusals(&worst);
+        if !refusals.is_empty() {
+            let reasons: Vec<String> = refusals.iter().map(ToString::to_string).collect();
+            return Err(format!("closed-loop check failed: {}", reasons.join("; ")));
         }
         let mpc = if model.c.iter().all(|v| *v == 0.0) {
             checked
