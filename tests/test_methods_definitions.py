@@ -43,13 +43,14 @@ def _linearised(dt: float, force: np.ndarray | None = None) -> tuple[np.ndarray,
 
 
 def _with_lag(ad: np.ndarray, bd: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray]:
-    """The plant behind a first-order lag a⁺ = a + α(u − a) whose tick mean (a + a⁺)/2
-    drives the mechanics; state [v, θ, θ̇, a]."""
+    """The plant behind a first-order lag a⁺ = a + α(u − a) whose exact mean over the tick
+    under a held u, u + s(a − u) with s = τα/Ts, drives the mechanics; state [v, θ, θ̇, a]."""
     al = 1.0 - math.exp(-DT / tau)
+    share = tau * al / DT
     a = np.zeros((4, 4))
-    a[:3, :3], a[:3, 3], a[3, 3] = ad, bd * (1 - al / 2), 1 - al
+    a[:3, :3], a[:3, 3], a[3, 3] = ad, bd * share, 1 - al
     b = np.zeros(4)
-    b[:3], b[3] = bd * al / 2, al
+    b[:3], b[3] = bd * (1 - share), al
     return a, b
 
 

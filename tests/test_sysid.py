@@ -874,12 +874,17 @@ def test_the_attitude_lag_is_read_from_the_command_against_the_acceleration():
     """The lag the selection flies behind and the NMPC predicts with (one fit, in the core):
     a flight whose acceleration follows the command through a known lag, with drag and a
     swing's pull beside it, gives that lag back; a flight that cannot tell it gives none."""
-    from swingrt.methods.nmpc import estimate_lag
+    from swingrt.methods.nmpc import estimate_lag, lagged
 
     for tau in (0.0, 0.08, 0.165, 0.3):
         v, theta, u = _lagged_flight(tau)
         assert _core.sysid_attitude_lag(v, theta, u, 0.02) == pytest.approx(tau, abs=1e-9)
         assert estimate_lag(v, theta, u, 0.02) == pytest.approx(tau, abs=1e-9)
+        # The NMPC predicts with the fit's discretisation: the acceleration it sees rebuilds
+        # the flight's velocity exactly.
+        acc = lagged(u, 0.02, tau)
+        rebuilt = v[:-1] + 0.02 * (acc[:-1] - 0.2 * v[:-1] - 1.1 * theta[:-1] + 0.03)
+        np.testing.assert_allclose(rebuilt, v[1:], rtol=0, atol=1e-12)
     v, theta, u = _lagged_flight(0.1)
     assert _core.sysid_attitude_lag(v, theta, np.ones_like(u), 0.02) is None
     with pytest.raises(DataError, match="swing has 10 samples"):

@@ -46,7 +46,7 @@ import numpy as np
 
 from swingrt.errors import ConfigError, ControlError
 
-__all__ = ["NmpcSettings", "Nmpc", "estimate_lag", "lagged", "pendulum_dynamics"]
+__all__ = ["NmpcSettings", "Nmpc", "estimate_lag", "lag_share", "lagged", "pendulum_dynamics"]
 
 
 @dataclass
@@ -179,20 +179,29 @@ def estimate_lag(v: np.ndarray, swing: np.ndarray, u: np.ndarray, dt: float) -> 
     return 0.0 if tau is None else float(tau)
 
 
+def lag_share(dt: float, tau: float) -> tuple[float, float]:
+    """(α, s) of a first-order lag τ under a setpoint held for ``dt``: the lag state moves
+    as a⁺ = a + α(u − a) and its exact mean over the tick is u + s·(a − u), the
+    discretisation the core's lag fit (``swing_core::sysid::lag``) uses; τ = 0: (1, 0)."""
+    if tau <= 0:
+        return 1.0, 0.0
+    alpha = -math.expm1(-dt / tau)
+    return alpha, tau * alpha / dt
+
+
 def lagged(u: np.ndarray, dt: float, tau: float) -> np.ndarray:
     """The acceleration the vehicle sees over each tick, as the prediction models it: the
-    mean of the lag state before and after the tick's update a⁺ = a + α(u − a)
-    (τ = 0: u itself)."""
+    exact mean over the tick of the lag state a⁺ = a + α(u − a) (:func:`lag_share`;
+    τ = 0: u itself)."""
     u = np.asarray(u, dtype=float)
     if tau <= 0:
         return u.copy()
-    alpha = 1.0 - math.exp(-dt / tau)
+    alpha, share = lag_share(dt, tau)
     out = np.empty_like(u)
     a = u[0]
     for k, uk in enumerate(u):
-        nxt = a + alpha * (uk - a)
-        out[k] = (a + nxt) / 2
-        a = nxt
+        out[k] = uk + share * (a - uk)
+        a = a + alpha * (uk - a)
     return out
 
 
@@ -245,8 +254,9 @@ class Nmpc:
         ts, np_, nc = s.period, s.horizon, s.control_horizon
         # The attitude loop as a first-order lag: the acceleration reaching the vehicle a
         # follows the setpoint u, a⁺ = a + α (u − a), α = 1 − exp(−Ts/τ); the mechanics
-        # see the tick's mean (a + a⁺)/2. State [v, θ, θ̇, a]; τ = 0: a = u.
-        self.alpha = 1.0 - math.exp(-ts / lag) if lag > 0 else 1.0
+        # see the tick's exact mean u + s (a − u) (lag_share). State [v, θ, θ̇, a];
+        # τ = 0: a = u.
+        self.alpha, share = lag_share(ts, lag)
         x = ca.SX.sym("x", 4)
         u = ca.SX.sym("u")
         d = ca.SX.sym("d", 2)
@@ -256,7 +266,7 @@ class Nmpc:
             return ca.vertcat(f[0], f[1], f[2] + dd[1])
 
         a_next = x[3] + self.alpha * (u - x[3])
-        a_mean = u if lag <= 0 else (x[3] + a_next) / 2
+        a_mean = u + share * (x[3] - u)
         xm = x[0:3]
         k1 = rhs(xm, a_mean, d)
         k2 = rhs(xm + ts / 2 * k1, a_mean, d)

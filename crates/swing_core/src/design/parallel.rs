@@ -3,7 +3,7 @@
 //! back in the jobs' order, so the outcome is the same on one core or many.
 
 /// Threads to use for `jobs` independent jobs: one per job, at most the machine's cores.
-fn threads_for(jobs: usize) -> usize {
+pub fn threads_for(jobs: usize) -> usize {
     std::thread::available_parallelism()
         .map_or(1, |n| n.get())
         .min(jobs)

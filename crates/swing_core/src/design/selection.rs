@@ -21,9 +21,11 @@
 //! slowly growing oscillation, are bounded too (`TwinHold`). A candidate that settles
 //! everywhere must also damp the swing to pass: its twin swing excess within a fraction of
 //! PX4's own on the same step. Of the first `passers` candidates that pass (looking at most
-//! `look_ahead` candidates past the first), the one that swings least on the twin is taken (one scalar cost; ties go to the lower NMAE, so without
-//! a twin the first that passes). When none passes, the settled candidate that swings least
-//! is taken rather than the first that settled.
+//! `look_ahead` candidates past the first), the one that swings least on the twin is taken
+//! (one scalar cost; ties go to the lower NMAE, so without a twin the first that passes).
+//! When none passes, the settled candidate that swings least is taken rather than the first
+//! that settled. Candidates are flown a batch at a time, one per core, and taken in order,
+//! so the choice is the one-by-one loop's on any number of cores.
 //!
 //! The decision is pure and separate from the flying: [`judge`] rules on one candidate's
 //! figures (every requirement it violates, as a [`Refusal`] that names the figure and its
@@ -37,7 +39,8 @@ use crate::control::{ControlError, MpcController, MpcSettings};
 use crate::design::check::{worst_step_check, StepCheck};
 use crate::design::twin::{TwinFlight, TwinHold, TwinPlant};
 use crate::sysid::pipeline::{self, candidate_row};
-use crate::sysid::search::SearchResult;
+use crate::sysid::search::{Candidate, SearchResult};
+use crate::sysid::stability::Verdict as ScreenVerdict;
 use crate::sysid::{IdentifySettings, LinearModel, Trajectory};
 
 /// Bounds of the closed-loop check, as fractions of the step.
@@ -240,9 +243,10 @@ pub struct SelectionSettings {
     /// Linear vehicle drags added to the white-box plant as extra plants [1/s].
     ///
     /// Quadratic drag linearised at airspeed w is ρ C_Q w / m per second: for the Honeybee
-    /// (C_Q 0.096 m², 1.0–1.45 kg with payload) 0.12 /s near 1–1.5 m/s, 0.4 /s near 3.5–5 m/s,
-    /// a 2 m/s step into a 3 m/s headwind. A model identified in light air whose MPC only
-    /// holds the first creeps or cycles in strong wind, so the default checks both.
+    /// (C_Q 0.096 m², 1.0–1.45 kg with payload) 0.12 /s near 1–1.5 m/s, 0.4 /s near
+    /// 3.5–5 m/s, a 2 m/s step into a 3 m/s headwind. A model identified in light air
+    /// whose MPC only holds the first creeps or cycles in strong wind, so the default
+    /// checks both.
     pub vehicle_drag: Vec<f64>,
     /// Velocity step of the check [m/s].
     pub step: f64,
@@ -650,6 +654,14 @@ pub fn choose(checked: &[CheckedCandidate], settings: &SelectionSettings) -> Opt
     least_miss.map(|(i, _)| (i, Pick::LeastMiss))
 }
 
+/// One row of the search flown by [`select_for_control`]: the candidate, the model it was
+/// flown on and the screen's verdict when the search had not screened it.
+struct Flown {
+    candidate: CheckedCandidate,
+    model: LinearModel,
+    screen_verdict: Option<ScreenVerdict>,
+}
+
 /// Outcome of [`select_for_control`].
 #[derive(Clone, Debug)]
 pub struct Selection {
@@ -761,24 +773,18 @@ pub fn select_for_control(
         Ok((figures, judge(&figures, pid, settings)))
     };
     let wander = |f: &CandidateFigures| f.hold.map_or(f64::INFINITY, |h| h.wander);
-    // The candidates that passed, by their index in `checked`, as flown.
-    let mut passers: Vec<(usize, LinearModel)> = Vec::new();
-    for row in rows {
-        let beyond_look_ahead = passers
-            .first()
-            .is_some_and(|(first, _)| checked.len() - first > settings.look_ahead);
-        if checked.len() >= settings.candidates || beyond_look_ahead {
-            break;
-        }
+    // One row of the table: refitted, screened when the search did not, flown (and flown
+    // again with the estimator's noise raised when its hold wandered). `None`: screened out.
+    let fly_row = |row: &&Candidate| -> Result<Option<Flown>, ControlError> {
         let model = refit(row.delays, row.rank)?;
+        let mut screen_verdict = None;
         if row.stable.is_none() {
             if let Some(screen) = &screen {
                 let verdict = screen.judge(&model.a)?;
                 if !verdict.stable {
-                    screened_out += 1;
-                    continue;
+                    return Ok(None);
                 }
-                verdicts.insert((row.delays, row.rank), verdict);
+                screen_verdict = Some(verdict);
             }
         }
         let mut model = model;
@@ -800,19 +806,49 @@ pub fn select_for_control(
                 (model, figures, verdict) = (retry, again, again_verdict);
             }
         }
-        let passed = verdict.passed();
-        checked.push(CheckedCandidate {
+        let candidate = CheckedCandidate {
             delays: row.delays,
             rank: row.rank,
             nmae: row.nmae,
             figures,
             verdict,
             measurement_noise: model.diagnostics.measurement_noise,
-        });
-        if passed {
-            passers.push((checked.len() - 1, model));
-            if passers.len() >= settings.passers {
-                break;
+        };
+        Ok(Some(Flown {
+            candidate,
+            model,
+            screen_verdict,
+        }))
+    };
+    // The rows are flown a batch at a time, one per core, and taken in order: each row's
+    // flights depend on nothing flown before it, so the outcome is the one-by-one loop's,
+    // and a batch's rows past the stop are dropped unread (errors included).
+    let batch = crate::design::parallel::threads_for(2);
+    // The candidates that passed, by their index in `checked`, as flown.
+    let mut passers: Vec<(usize, LinearModel)> = Vec::new();
+    'rows: for chunk in rows.chunks(batch) {
+        let outcomes = crate::design::parallel::map(chunk.iter().collect(), fly_row);
+        for (row, outcome) in chunk.iter().zip(outcomes) {
+            let beyond_look_ahead = passers
+                .first()
+                .is_some_and(|(first, _)| checked.len() - first > settings.look_ahead);
+            if checked.len() >= settings.candidates || beyond_look_ahead {
+                break 'rows;
+            }
+            let Some(flown) = outcome? else {
+                screened_out += 1;
+                continue;
+            };
+            if let Some(v) = flown.screen_verdict {
+                verdicts.insert((row.delays, row.rank), v);
+            }
+            let passed = flown.candidate.passed();
+            checked.push(flown.candidate);
+            if passed {
+                passers.push((checked.len() - 1, flown.model));
+                if passers.len() >= settings.passers {
+                    break 'rows;
+                }
             }
         }
     }

@@ -67,6 +67,63 @@ pub fn eigenvalues(m: &DMatrix<f64>) -> Option<Vec<nalgebra::Complex<f64>>> {
     )
 }
 
+/// Squarings [`schur_stable`] tries before it computes the eigenvalues: 2²⁰ steps, so a
+/// power settles either way unless ρ is within about 1e-5 of 1 (or a transient lasts longer).
+const STABILITY_SQUARINGS: usize = 20;
+
+/// Whether every eigenvalue of the square matrix `m` lies strictly inside the unit circle,
+/// or `None` as [`eigenvalues`].
+///
+/// Decided by repeated squaring where that is conclusive, a few matrix products instead of
+/// a Schur decomposition: ρ(M)ʲ ≤ ‖Mʲ‖₁ proves ρ < 1 once a power's norm is below ½, and
+/// |tr Mʲ| ≤ n ρʲ proves ρ > 1 once a power's trace exceeds 2n (the factors of 2 are margins
+/// far above the products' rounding). A matrix whose powers settle neither way within
+/// [`STABILITY_SQUARINGS`] squarings falls back to the eigenvalues, so the answer is the
+/// eigenvalues' wherever they are not within rounding of the unit circle.
+pub fn schur_stable(m: &DMatrix<f64>) -> Option<bool> {
+    if !m.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    let n = m.nrows();
+    if n == 0 {
+        return Some(true);
+    }
+    let (stable_below, unstable_above) = (0.5f64.ln(), (2.0 * n as f64).ln());
+    // The power Mʲ (j = 2ᵏ) is kept as exp(log_scale) · b with ‖b‖₁ = 1: no overflow.
+    let mut b = to_faer(m);
+    let mut log_scale = 0.0;
+    for k in 0..=STABILITY_SQUARINGS {
+        if k > 0 {
+            b = &b * &b;
+            log_scale *= 2.0;
+        }
+        let norm = column_sum_norm(&b);
+        if norm == 0.0 {
+            return Some(true); // nilpotent
+        }
+        if !norm.is_finite() {
+            break;
+        }
+        b /= faer::Scale(norm);
+        log_scale += norm.ln();
+        if log_scale < stable_below {
+            return Some(true);
+        }
+        let trace: f64 = (0..n).map(|i| b[(i, i)]).sum();
+        if log_scale + trace.abs().ln() > unstable_above {
+            return Some(false);
+        }
+    }
+    Some(spectral_radius(m)? < 1.0)
+}
+
+/// ‖b‖₁, the largest column sum of magnitudes.
+fn column_sum_norm(b: &faer::Mat<f64>) -> f64 {
+    (0..b.ncols())
+        .map(|j| (0..b.nrows()).map(|i| b[(i, j)].abs()).sum::<f64>())
+        .fold(0.0, f64::max)
+}
+
 /// `m` as a faer matrix.
 pub(crate) fn to_faer(m: &DMatrix<f64>) -> faer::Mat<f64> {
     faer::Mat::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)])
@@ -92,4 +149,66 @@ pub fn c2d_zoh(a: &DMatrix<f64>, b: &DMatrix<f64>, dt: f64) -> (DMatrix<f64>, DM
         e.view((0, 0), (n, n)).into_owned(),
         e.view((0, n), (n, m)).into_owned(),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+
+    /// A 2×2 rotation by `angle` scaled by `r`: eigenvalues r·e^{±i·angle}.
+    fn rotation(r: f64, angle: f64) -> DMatrix<f64> {
+        let (s, c) = angle.sin_cos();
+        DMatrix::from_row_slice(2, 2, &[r * c, -r * s, r * s, r * c])
+    }
+
+    #[test]
+    fn schur_stable_agrees_with_closed_forms() {
+        assert_eq!(schur_stable(&DMatrix::zeros(0, 0)), Some(true));
+        assert_eq!(
+            schur_stable(&DMatrix::from_diagonal_element(3, 3, 0.0)),
+            Some(true)
+        );
+        let diag = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![0.9, 1.1, 0.2]));
+        assert_eq!(schur_stable(&diag), Some(false));
+        assert_eq!(schur_stable(&rotation(0.999, 0.3)), Some(true));
+        assert_eq!(schur_stable(&rotation(1.001, 0.3)), Some(false));
+        // On the circle neither certificate fires: the eigenvalues decide (ρ = 1 is unstable).
+        assert_eq!(schur_stable(&rotation(1.0, 0.3)), Some(false));
+        // Within 1e-9 of it too; the eigenvalues still tell stable from unstable.
+        assert_eq!(schur_stable(&rotation(1.0 - 1e-9, 0.3)), Some(true));
+        assert_eq!(schur_stable(&rotation(1.0 + 1e-9, 0.3)), Some(false));
+        // A Jordan block's powers grow by 1e6 before they decay: still stable.
+        let jordan = DMatrix::from_row_slice(2, 2, &[0.99, 1e6, 0.0, 0.99]);
+        assert_eq!(schur_stable(&jordan), Some(true));
+        // Nilpotent: the shift.
+        let shift = DMatrix::from_fn(5, 5, |i, j| if i == j + 1 { 1.0 } else { 0.0 });
+        assert_eq!(schur_stable(&shift), Some(true));
+        let mut bad = rotation(0.5, 0.1);
+        bad[(0, 1)] = f64::NAN;
+        assert_eq!(schur_stable(&bad), None);
+    }
+
+    #[test]
+    fn schur_stable_agrees_with_the_eigenvalues_near_the_circle() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut seen = [0usize; 2];
+        for trial in 0..200 {
+            let n = 2 + trial % 40;
+            let mut m = DMatrix::from_fn(n, n, |_, _| rng.random_range(-1.0..1.0));
+            let rho = spectral_radius(&m).unwrap();
+            // Scale to a radius within ±2 % of 1, never closer than 1e-4.
+            let target =
+                1.0 + rng.random_range(1e-4..0.02) * if trial % 2 == 0 { 1.0 } else { -1.0 };
+            m *= target / rho;
+            let want = spectral_radius(&m).unwrap() < 1.0;
+            assert_eq!(
+                schur_stable(&m),
+                Some(want),
+                "trial {trial}, n {n}, ρ {target}"
+            );
+            seen[want as usize] += 1;
+        }
+        assert!(seen[0] > 50 && seen[1] > 50, "{seen:?}");
+    }
 }

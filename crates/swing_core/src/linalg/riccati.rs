@@ -23,7 +23,9 @@
 use faer::linalg::solvers::Solve;
 use nalgebra::DMatrix;
 
-use super::{eigenvalues, expm, to_faer, LinalgError, EXPM_MAX_ENTRY};
+use super::{
+    eigenvalues, expm, schur_stable, spectral_radius, to_faer, LinalgError, EXPM_MAX_ENTRY,
+};
 
 /// A Riccati solution: gain K (u = −Kx), stabilising solution P and its relative residual.
 #[derive(Clone, Debug)]
@@ -300,14 +302,10 @@ pub fn dare_with_cross(
         )));
     }
     let acl = a - b * &k;
-    let rho = eigenvalues(&acl)
-        .ok_or_else(|| {
-            LinalgError::NoSolution("DARE: closed-loop eigenvalues did not converge".into())
-        })?
-        .iter()
-        .map(|l| l.norm())
-        .fold(0.0, f64::max);
-    if rho >= 1.0 {
+    let unconverged =
+        || LinalgError::NoSolution("DARE: closed-loop eigenvalues did not converge".into());
+    if !schur_stable(&acl).ok_or_else(unconverged)? {
+        let rho = spectral_radius(&acl).ok_or_else(unconverged)?;
         return Err(LinalgError::NoSolution(format!(
             "DARE: closed loop not stable (spectral radius {rho:.6})"
         )));

@@ -34,12 +34,19 @@ pub struct LagFit {
 
 /// The lag between the command (input `axis` of `train`) and the acceleration of its
 /// velocity (state `axis`), with the swing (state `axes + axis`) as a nuisance regressor,
-/// fitted jointly over `axes` axes sampled every `dt` seconds; `None` when the flight does
-/// not tell it (too short, no excitation, the fit explains less than [`MIN_R2`], or its
-/// least residual lies at the grid's end [`MAX_LAG`]).
+/// fitted jointly over those of the `axes` axes (sampled every `dt` seconds) that were
+/// excited; `None` when the flight does not tell it (too short, no axis excited, the fit
+/// explains less than [`MIN_R2`], or its least residual lies at the grid's end [`MAX_LAG`]).
 pub fn attitude_lag(train: &Trajectory<'_>, axes: usize, dt: f64) -> Option<LagFit> {
     let dt_ok = dt.is_finite() && dt > 0.0;
     if axes == 0 || train.m < axes || train.n < 2 * axes || train.len < 50 || !dt_ok {
+        return None;
+    }
+    // An axis whose command never moves has no regression; the others still tell the lag.
+    let excited: Vec<usize> = (0..axes)
+        .filter(|&ax| axis_residual(train, axes, ax, 0.0, dt).is_some())
+        .collect();
+    if excited.is_empty() {
         return None;
     }
     let steps = (MAX_LAG / LAG_STEP).round() as usize;
@@ -49,7 +56,7 @@ pub fn attitude_lag(train: &Trajectory<'_>, axes: usize, dt: f64) -> Option<LagF
         let tau = i as f64 * LAG_STEP;
         let mut residual = 0.0;
         total = 0.0;
-        for ax in 0..axes {
+        for &ax in &excited {
             let (r, t) = axis_residual(train, axes, ax, tau, dt)?;
             residual += r;
             total += t;
@@ -160,6 +167,23 @@ mod tests {
         let train = Trajectory::new(&x, 2, &u, 1).unwrap();
         let fit = attitude_lag(&train, 1, dt).unwrap();
         assert!((fit.tau - 0.15).abs() <= 2.0 * LAG_STEP, "{fit:?}");
+    }
+
+    #[test]
+    fn an_axis_never_commanded_leaves_the_other_axis_s_lag() {
+        let dt = 0.02;
+        let (x1, u1) = flight(0.13, dt, 3000, 0.0);
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        // States [v_n, v_e, θ_n, θ_e], inputs [u_n, u_e]; east holds still, commanded 0.
+        let mut x = Vec::new();
+        let mut u = Vec::new();
+        for k in 0..u1.len() {
+            x.extend([x1[2 * k], rng.random_range(-1e-3..1e-3), x1[2 * k + 1], 0.0]);
+            u.extend([u1[k], 0.0]);
+        }
+        let train = Trajectory::new(&x, 4, &u, 2).unwrap();
+        let fit = attitude_lag(&train, 2, dt).unwrap();
+        assert!((fit.tau - 0.13).abs() <= LAG_STEP, "{fit:?}");
     }
 
     #[test]
