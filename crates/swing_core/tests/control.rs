@@ -1106,7 +1106,9 @@ fn measurement_noise_reaches_the_command_attenuated() {
 /// eigenvalue modulus passes 1) counts as diverged, and a gain just below that one flies.
 #[test]
 fn step_check_rejects_an_unstable_linear_loop_before_flying() {
-    use swing_core::design::check::{closed_loop_radius, mpc_step_check, StepCheckSettings};
+    use swing_core::design::check::{
+        closed_loop_radius, closed_loop_stable, mpc_step_check, StepCheckSettings,
+    };
     let m = model(0.2, 1.0, 8);
     let mpc = MpcController::new(&m, MpcSettings::default()).unwrap();
     let scaled = |k: f64| {
@@ -1136,6 +1138,21 @@ fn step_check_rejects_an_unstable_linear_loop_before_flying() {
     )
     .unwrap();
     assert!(r.final_error.is_finite(), "{r:?}");
+    // The check asks `closed_loop_stable` (repeated squaring), which must answer as the
+    // eigenvalues do on every loop of the sweep, behind a lag or not, up to the boundary.
+    for i in 10..(k_bad * 10.0).round() as usize + 20 {
+        let plant = scaled(i as f64 * 0.1);
+        for lag in [0.0, 0.7] {
+            let rho = closed_loop_radius(&mpc, &m, &plant, lag).unwrap();
+            let stable = closed_loop_stable(&mpc, &m, &plant, lag).unwrap();
+            assert_eq!(
+                stable,
+                rho < 1.0,
+                "gain ×{:.1}, lag {lag}: ρ {rho}",
+                i as f64 * 0.1
+            );
+        }
+    }
     // A bad lag factor is a typed error.
     assert!(closed_loop_radius(&mpc, &m, &m, 1.5).is_err());
 }

@@ -43,23 +43,25 @@ pub fn attitude_lag(train: &Trajectory<'_>, axes: usize, dt: f64) -> Option<LagF
         return None;
     }
     // An axis whose command never moves has no regression; the others still tell the lag.
-    let excited: Vec<usize> = (0..axes)
-        .filter(|&ax| axis_residual(train, axes, ax, 0.0, dt).is_some())
-        .collect();
+    // The total sum of squares is the acceleration's alone, the same at every lag.
+    let mut excited = Vec::with_capacity(axes);
+    let mut total = 0.0;
+    for ax in 0..axes {
+        if let Some((_, t)) = axis_residual(train, axes, ax, 0.0, dt) {
+            excited.push(ax);
+            total += t;
+        }
+    }
     if excited.is_empty() {
         return None;
     }
     let steps = (MAX_LAG / LAG_STEP).round() as usize;
     let mut best: Option<(f64, f64)> = None;
-    let mut total = 0.0;
     for i in 0..=steps {
         let tau = i as f64 * LAG_STEP;
         let mut residual = 0.0;
-        total = 0.0;
         for &ax in &excited {
-            let (r, t) = axis_residual(train, axes, ax, tau, dt)?;
-            residual += r;
-            total += t;
+            residual += axis_residual(train, axes, ax, tau, dt)?.0;
         }
         if best.is_none_or(|(_, r)| residual < r) {
             best = Some((tau, residual));
