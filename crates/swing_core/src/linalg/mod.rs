@@ -1,6 +1,7 @@
 //! Dense linear algebra the other layers share, at the bottom of the crate: the matrix
-//! exponential, zero-order-hold discretisation, bounded eigenvalue computation and the
-//! Riccati solvers ([`riccati`]). It knows nothing of vehicles, models or controllers.
+//! exponential, zero-order-hold discretisation, bounded eigenvalue computation, a stability
+//! test by repeated squaring and the Riccati solvers ([`riccati`]). It knows nothing of
+//! vehicles, models or controllers.
 
 pub mod riccati;
 
