@@ -110,6 +110,23 @@ def test_identify_search_works_on_a_log_without_thrust(real_logs, cli):
     assert "no 'thrust' column" in cc["plant"] and "--payload-mass" in cc["plant"]
     screen = model.diagnostics["stability_screen"]
     assert "velocity integrator" in screen["criterion"] and screen["stable"] is True
+    # The wander the linear analysis predicts for the pick: the flight's swing noise (0.004
+    # rad) through each checked loop, the worst of them; the first loop (the white-box as
+    # identified, no lag) is the one the core's velocity_wander computes from the same parts.
+    w = cc["wander"]
+    assert abs(w["swing_noise"] / 0.004 - 1) < 0.25, w
+    assert len(w["per_loop"]) == len(cc["input_lags"]) * (1 + len(cc["vehicle_drag"]))
+    assert w["worst"] == max(w["per_loop"]) and 0 < w["worst"] < 0.02, w
+    from swingrt import _core
+    from swingrt.io import load_flight
+
+    plant = swingrt.sysid.identify(
+        load_flight(real_logs / "flight.csv"), method="whitebox", payload_mass=0.2
+    )
+    direct = _core.velocity_wander(
+        model, plant, None, cc["input_lags"][0], w["swing_noise"], span=w["span"]
+    )
+    assert abs(direct / cc["step"] - w["per_loop"][0]) < 1e-9 * w["per_loop"][0], (direct, w)
     r = cli("identify", real_logs / "flight.csv", "--search", "--payload-mass", "0.3", "-o", out)
     assert r.returncode == 0, r.stderr
     plant = swingrt.LinearModel.load(out).diagnostics["control_check"]["plant"]

@@ -45,6 +45,7 @@ __all__ = [
     "select_for_control",
     "sim_real_time_factor",
     "step_overshoot",
+    "velocity_wander",
     "swing_iae",
     "swing_mode",
     "swing_scale_fit",
@@ -487,6 +488,15 @@ def mpc_step_check(
     duration: float = 20.0,
     input_lags: list[float] = ...,
 ) -> list[dict[str, float]]: ...
+def velocity_wander(
+    model: LinearModel,
+    plant: LinearModel,
+    settings: Any = None,
+    input_lag: float = 0.0,
+    swing_noise: float = 0.0,
+    velocity_noise: float = 0.0,
+    span: float = 2.0,
+) -> float: ...
 def step_overshoot(v: npt.NDArray[np.float64], v_before: float, v_after: float) -> float: ...
 def swing_iae(
     t: npt.NDArray[np.float64], swing: npt.NDArray[np.float64], along: npt.NDArray[np.float64]

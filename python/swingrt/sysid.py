@@ -535,7 +535,10 @@ def select_for_control(
     candidate whose hold wanders more than ``noise_retry_wander`` is checked again with its
     MPC's Kalman measurement noise raised ``noise_retry`` times; when that does better, the
     model carries the raised noise (``diagnostics['measurement_noise']``) and every MPC
-    built on it assumes at least that. Without a white-box (a model-only check) the twin is
+    built on it assumes at least that. ``control_check['wander']`` reports (does not judge)
+    the pick's noise-driven wander the linear analysis predicts on each checked loop
+    (:func:`swingrt._core.velocity_wander`, a fraction of the step). Without a white-box (a
+    model-only check) the twin is
     not flown. A flight identified on the IMU's swing estimate (:func:`swing_source`) flies
     the twin on the same estimate (its ``sensors`` set to the flight's swing source and
     estimator). ``check`` is :func:`check_plant`'s answer when the caller already has it

@@ -501,6 +501,38 @@ fn pendulum_model(
     PyLinearModel::wrap(py, m)
 }
 
+/// How far white measurement noise moves the `span`-second mean velocity of the MPC on
+/// `model` (unconstrained, `settings`) flying the linear `plant` behind a first-order lag of
+/// `input_lag` s: the stationary standard deviation of that mean [m/s], the largest over the
+/// axes, `inf` for an unstable loop (`swing_core::design::check::velocity_wander`).
+#[pyfunction]
+#[pyo3(signature = (model, plant, settings=None, input_lag=0.0, swing_noise=0.0, velocity_noise=0.0, span=2.0))]
+#[allow(clippy::too_many_arguments)]
+fn velocity_wander(
+    py: Python<'_>,
+    model: &PyLinearModel,
+    plant: &PyLinearModel,
+    settings: Option<&Bound<'_, PyAny>>,
+    input_lag: f64,
+    swing_noise: f64,
+    velocity_noise: f64,
+    span: f64,
+) -> PyResult<f64> {
+    let model = model.inner.clone();
+    let plant = plant.inner.clone();
+    let settings: MpcSettings = convert::settings(settings, "settings")?;
+    let noise = check::MeasurementNoise {
+        velocity: velocity_noise,
+        swing: swing_noise,
+        swing_rate: 0.0,
+    };
+    py.detach(|| {
+        let mpc = MpcController::new(&model, settings)?;
+        check::velocity_wander(&mpc, &model, &plant, input_lag, noise, span)
+    })
+    .map_err(to_py)
+}
+
 /// Closed-loop step checks of the MPC on `model_json` flying each linear plant of
 /// `plant_jsons` behind each of `input_lags` (see `swing_core::design::check`; the MPC is
 /// designed once): a list, plant-major, of dicts of `overshoot`, `final_error`,
@@ -587,6 +619,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyAdaptiveMpc>()?;
     m.add_function(wrap_pyfunction!(pendulum_model, m)?)?;
     m.add_function(wrap_pyfunction!(mpc_step_check, m)?)?;
+    m.add_function(wrap_pyfunction!(velocity_wander, m)?)?;
     m.add_function(wrap_pyfunction!(step_overshoot, m)?)?;
     m.add_function(wrap_pyfunction!(swing_iae, m)?)?;
     m.add("FINAL_SPAN", check::FINAL_SPAN)?;

@@ -15,7 +15,8 @@
 //!
 //! The same linear loop driven by white measurement noise ([`noise_loop`], [`noise_gain`])
 //! gives the stationary RMS of the command and of its tick-to-tick change: how much sensor
-//! noise the MPC passes on to the attitude loop.
+//! noise the MPC passes on to the attitude loop; and the standard deviation of the velocity's
+//! mean over a span ([`velocity_wander`]): how far the noise moves a flight's steady state.
 
 use crate::config::{finite, non_negative, positive, ConfigError};
 use std::ops::{AddAssign, SubAssign};
@@ -549,22 +550,7 @@ pub fn noise_gain(
     noise: MeasurementNoise,
 ) -> Result<NoiseGain, ControlError> {
     let nl = noise_loop(mpc, controller, plant)?;
-    let (sources, _, _) = mpc.frame_layout();
-    let w: Vec<f64> = sources
-        .iter()
-        .map(|s| match s {
-            Measured::V(_) => noise.velocity,
-            Measured::Swing(_) => noise.swing,
-            Measured::SwingRate(_) => noise.swing_rate,
-        })
-        .collect();
-    for (name, v) in [
-        ("velocity", noise.velocity),
-        ("swing", noise.swing),
-        ("swing_rate", noise.swing_rate),
-    ] {
-        non_negative(name, v)?;
-    }
+    let w = noise_levels(mpc, noise)?;
     let ev = crate::linalg::eigenvalues(&nl.a).ok_or_else(|| {
         ControlError::Synthesis("closed-loop eigenvalues did not converge".into())
     })?;
@@ -579,21 +565,11 @@ pub fn noise_gain(
             rms_du: f64::INFINITY,
         });
     }
-    // Stationary covariance P = A P Aᵀ + B W Bᵀ by doubling: P ← P + Aᵏ P (Aᵏ)ᵀ, Aᵏ ← (Aᵏ)².
     let mut bw = nl.b.clone();
     for (j, s) in w.iter().enumerate() {
         bw.column_mut(j).scale_mut(*s);
     }
-    let mut p = &bw * bw.transpose();
-    let mut ak = nl.a.clone();
-    for _ in 0..60 {
-        let inc = &ak * &p * ak.transpose();
-        p += &inc;
-        ak = &ak * &ak;
-        if inc.amax() <= 1e-15 * p.amax().max(f64::MIN_POSITIVE) {
-            break;
-        }
-    }
+    let p = crate::linalg::stationary_covariance(&nl.a, &bw);
     let rms = |c: &DMatrix<f64>, d: &DMatrix<f64>| {
         let mut dw = d.clone();
         for (j, s) in w.iter().enumerate() {
@@ -607,6 +583,82 @@ pub fn noise_gain(
         rms_u: rms(&nl.c_u, &nl.d_u),
         rms_du: rms(&nl.c_du, &nl.d_du),
     })
+}
+
+/// The noise level of each model state of `mpc`'s newest frame, checked non-negative.
+fn noise_levels(mpc: &MpcController, noise: MeasurementNoise) -> Result<Vec<f64>, ControlError> {
+    for (name, v) in [
+        ("velocity", noise.velocity),
+        ("swing", noise.swing),
+        ("swing_rate", noise.swing_rate),
+    ] {
+        non_negative(name, v)?;
+    }
+    let (sources, _, _) = mpc.frame_layout();
+    Ok(sources
+        .iter()
+        .map(|s| match s {
+            Measured::V(_) => noise.velocity,
+            Measured::Swing(_) => noise.swing,
+            Measured::SwingRate(_) => noise.swing_rate,
+        })
+        .collect())
+}
+
+/// How far white measurement noise moves the mean velocity over `span` seconds (the figure a
+/// flight's steady-state error is read from) when `mpc` (designed on `controller`,
+/// unconstrained) flies `plant` behind a first-order lag of time constant `input_lag` [s]:
+/// the stationary standard deviation of that mean [m/s], the largest over the axes; ∞ when
+/// the loop is unstable. The linear, analytic counterpart of the twin's hold wander.
+pub fn velocity_wander(
+    mpc: &MpcController,
+    controller: &LinearModel,
+    plant: &LinearModel,
+    input_lag: f64,
+    noise: MeasurementNoise,
+    span: f64,
+) -> Result<f64, ControlError> {
+    non_negative("input_lag", input_lag)?;
+    positive("span", span)?;
+    let w = noise_levels(mpc, noise)?;
+    let dt = plant.dt;
+    let window = (span / dt).round();
+    if window > MAX_CHECK_TICKS as f64 {
+        return Err(
+            ConfigError::new("span", format!("{span} s at dt = {dt} s is too long")).into(),
+        );
+    }
+    let lag = if input_lag > 0.0 {
+        (-dt / input_lag).exp()
+    } else {
+        0.0
+    };
+    let nl = lagged_noise_loop(mpc, controller, plant, lag)?;
+    let stable = crate::linalg::schur_stable(&nl.a).ok_or_else(|| {
+        ControlError::Synthesis("closed-loop eigenvalues did not converge".into())
+    })?;
+    if !stable {
+        return Ok(f64::INFINITY);
+    }
+    let mut bw = nl.b.clone();
+    for (j, s) in w.iter().enumerate() {
+        bw.column_mut(j).scale_mut(*s);
+    }
+    let p = crate::linalg::stationary_covariance(&nl.a, &bw);
+    // The plant's states come first in the loop's state.
+    let layout = crate::control::AxisLayout::from_model(plant)?;
+    let mut worst = 0.0_f64;
+    for ax in layout.axes() {
+        let mut c = DMatrix::<f64>::zeros(1, nl.a.ncols());
+        c[(0, ax.v)] = 1.0;
+        worst = worst.max(crate::linalg::window_mean_std(
+            &nl.a,
+            &p,
+            &c,
+            window as usize,
+        ));
+    }
+    Ok(worst)
 }
 
 #[cfg(test)]

@@ -36,8 +36,8 @@ use serde_json::json;
 
 use crate::config::{finite, non_negative, positive, ConfigError};
 use crate::control::{ControlError, MpcController, MpcSettings};
-use crate::design::check::{worst_step_check, StepCheck};
-use crate::design::twin::{TwinFlight, TwinHold, TwinPlant};
+use crate::design::check::{self, worst_step_check, StepCheck};
+use crate::design::twin::{TwinFlight, TwinHold, TwinPlant, WANDER_SPAN};
 use crate::sysid::pipeline::{self, candidate_row};
 use crate::sysid::search::{Candidate, SearchResult};
 use crate::sysid::stability::Verdict as ScreenVerdict;
@@ -872,6 +872,7 @@ pub fn select_for_control(
         .iter()
         .find(|c| (c.delays, c.rank) == (model.delays, model.rank))
         .unwrap_or(best);
+    let wander = predicted_wander(&model, mpc_settings, plant, &plants, &lags, settings.step)?;
     let extra = &mut model.diagnostics.extra;
     extra.insert("selected".into(), candidate_row(selected, states));
     if let Some(v) = selected
@@ -900,6 +901,7 @@ pub fn select_for_control(
             "look_ahead": settings.look_ahead,
             "pick": pick.to_string(),
             "screened_out": screened_out,
+            "wander": wander,
             "checked": checked.iter().map(checked_json).collect::<Vec<_>>(),
         }),
     );
@@ -908,6 +910,53 @@ pub fn select_for_control(
         passed,
         checked,
     })
+}
+
+/// The wander the linear analysis predicts for the picked `model`'s MPC
+/// ([`check::velocity_wander`]: the standard deviation of the 2 s mean velocity, as a fraction
+/// of the step) on each of the check's `plants` behind each of its `lags`, driven by the
+/// training flight's swing-sensor noise (the white-box's estimate); reported, not judged
+/// (null: no noise estimate, or for a figure an unstable loop).
+fn predicted_wander(
+    model: &LinearModel,
+    mpc_settings: &MpcSettings,
+    plant: &LinearModel,
+    plants: &[LinearModel],
+    lags: &[f64],
+    step: f64,
+) -> Result<serde_json::Value, ControlError> {
+    let Some(swing) = plant
+        .diagnostics
+        .whitebox
+        .as_ref()
+        .and_then(|w| w.swing_noise)
+    else {
+        return Ok(serde_json::Value::Null);
+    };
+    let noise = check::MeasurementNoise {
+        velocity: 0.0,
+        swing,
+        swing_rate: 0.0,
+    };
+    let mpc = MpcController::new(model, mpc_settings.clone())?;
+    let mut loops = Vec::with_capacity(plants.len() * lags.len());
+    for p in plants {
+        for &lag in lags {
+            loops.push((p, lag));
+        }
+    }
+    let figures = crate::design::parallel::map(loops, |(p, lag)| {
+        check::velocity_wander(&mpc, model, p, lag, noise, WANDER_SPAN).map(|w| w / step.abs())
+    })
+    .into_iter()
+    .collect::<Result<Vec<_>, _>>()?;
+    let worst = figures.iter().copied().fold(0.0_f64, f64::max);
+    Ok(json!({
+        "swing_noise": swing,
+        "span": WANDER_SPAN,
+        "worst": worst,
+        "per_loop": figures,
+    }))
 }
 
 /// A checked candidate's figures and verdict for the diagnostics.

@@ -1,6 +1,7 @@
 //! Dense linear algebra the other layers share, at the bottom of the crate: the matrix
 //! exponential, zero-order-hold discretisation, bounded eigenvalue computation, a stability
-//! test by repeated squaring and the Riccati solvers ([`riccati`]). It knows nothing of
+//! test by repeated squaring, the stationary covariance of a stable recursion and the Riccati
+//! solvers ([`riccati`]). It knows nothing of
 //! vehicles, models or controllers.
 
 pub mod riccati;
@@ -152,15 +153,92 @@ pub fn c2d_zoh(a: &DMatrix<f64>, b: &DMatrix<f64>, dt: f64) -> (DMatrix<f64>, DM
     )
 }
 
+/// Stationary covariance P = A P Aᵀ + B Bᵀ of x⁺ = A x + B e with white unit e (A stable),
+/// by doubling: P ← P + Aᵏ P (Aᵏ)ᵀ, Aᵏ ← (Aᵏ)², until the increment is negligible.
+pub fn stationary_covariance(a: &DMatrix<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
+    let mut p = b * b.transpose();
+    let mut ak = a.clone();
+    for _ in 0..60 {
+        let inc = &ak * &p * ak.transpose();
+        p += &inc;
+        ak = &ak * &ak;
+        if inc.amax() <= 1e-15 * p.amax().max(f64::MIN_POSITIVE) {
+            break;
+        }
+    }
+    p
+}
+
+/// Standard deviation of the mean of output `c x` over `window` consecutive ticks of the
+/// stationary process x⁺ = A x + B e (white unit e, A stable, no feedthrough of e to the
+/// output): with the lag covariances γ_k = c Aᵏ P cᵀ,
+/// Var(mean) = (N γ₀ + 2 Σ_{k=1}^{N−1} (N − k) γ_k) / N².
+pub fn window_mean_std(a: &DMatrix<f64>, p: &DMatrix<f64>, c: &DMatrix<f64>, window: usize) -> f64 {
+    let n = window.max(1) as f64;
+    // Aᵏ P cᵀ column by column, one product per lag.
+    let mut w = p * c.transpose();
+    let mut sum = n * (c * &w).trace();
+    for k in 1..window {
+        w = a * &w;
+        sum += 2.0 * (n - k as f64) * (c * &w).trace();
+    }
+    (sum.max(0.0) / (n * n)).sqrt()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::DVector;
     use rand::{RngExt, SeedableRng};
 
     /// A 2×2 rotation by `angle` scaled by `r`: eigenvalues r·e^{±i·angle}.
     fn rotation(r: f64, angle: f64) -> DMatrix<f64> {
         let (s, c) = angle.sin_cos();
         DMatrix::from_row_slice(2, 2, &[r * c, -r * s, r * s, r * c])
+    }
+
+    #[test]
+    fn the_stationary_covariance_and_the_window_mean_match_closed_forms() {
+        // AR(1) x⁺ = a x + b e: P = b²/(1 − a²), γ_k = aᵏ P and
+        // Σ_{k=1}^{N−1} (N − k) aᵏ = a (N (1 − a) − (1 − a^N)) / (1 − a)².
+        for (a, b, n) in [
+            (0.9, 0.5, 67usize),
+            (-0.6, 2.0, 10),
+            (0.999, 0.1, 1),
+            (0.5, 1.0, 2),
+        ] {
+            let am = DMatrix::from_element(1, 1, a);
+            let bm = DMatrix::from_element(1, 1, b);
+            let p = stationary_covariance(&am, &bm);
+            let p0 = b * b / (1.0 - a * a);
+            assert!(
+                (p[(0, 0)] - p0).abs() < 1e-9 * p0,
+                "{a}: {} vs {p0}",
+                p[(0, 0)]
+            );
+            let nf = n as f64;
+            let sum = a * (nf * (1.0 - a) - (1.0 - a.powi(n as i32))) / (1.0 - a).powi(2);
+            let want = (p0 * (nf + 2.0 * sum) / (nf * nf)).sqrt();
+            let c = DMatrix::from_element(1, 1, 1.0);
+            let got = window_mean_std(&am, &p, &c, n);
+            assert!((got - want).abs() < 1e-9 * want, "{a} {n}: {got} vs {want}");
+        }
+        // A coupled, non-normal pair against vec(P) = (I − A⊗A)⁻¹ vec(B Bᵀ).
+        let a = DMatrix::from_row_slice(2, 2, &[0.8, 0.5, -0.2, 0.6]);
+        let b = DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.3, 0.4]);
+        let p = stationary_covariance(&a, &b);
+        let kron = a.kronecker(&a);
+        let rhs = &b * b.transpose();
+        let vec_p = (DMatrix::<f64>::identity(4, 4) - kron)
+            .lu()
+            .solve(&DVector::from_column_slice(rhs.as_slice()))
+            .unwrap();
+        for (got, want) in p.iter().zip(vec_p.iter()) {
+            assert!(
+                (got - want).abs() < 1e-10 * want.abs().max(1.0),
+                "{p} vs {vec_p}"
+            );
+        }
     }
 
     #[test]
