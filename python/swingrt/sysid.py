@@ -494,8 +494,8 @@ def select_for_control(
     bounds: Mapping[str, float] | None = None,
     twin: _core.Scenario | str | None = "builtin",
     twin_bounds: Mapping[str, float] | None = None,
-    noise_retry: float | None = None,
-    noise_retry_wander: float | None = None,
+    noise_factors: Sequence[float] | None = None,
+    wander_sigmas: float | None = None,
     check: tuple[LinearModel, str] | None = None,
     **settings: Any,
 ) -> SearchResult:
@@ -531,16 +531,18 @@ def select_for_control(
     ``swing_excess_min`` deg·s) passes; of the first ``passers`` that pass, looking at most
     ``look_ahead`` candidates past the first that passes, the one that swings least on the
     twin is taken (ties to the lower NMAE), else the one of all that settled that swings
-    least. A
-    candidate whose hold wanders more than ``noise_retry_wander`` is checked again with its
-    MPC's Kalman measurement noise raised ``noise_retry`` times; when that does better, the
-    model carries the raised noise (``diagnostics['measurement_noise']``) and every MPC
-    built on it assumes at least that. ``control_check['wander']`` reports (does not judge)
-    the pick's noise-driven wander the linear analysis predicts on each checked loop
-    (:func:`swingrt._core.velocity_wander`, a fraction of the step). Without a white-box (a
-    model-only check) the twin is
-    not flown. A flight identified on the IMU's swing estimate (:func:`swing_source`) flies
-    the twin on the same estimate (its ``sensors`` set to the flight's swing source and
+    least. Before a candidate flies, its estimator is designed against the flight's swing
+    noise: the swing channels' Kalman measurement noise is the first of ``noise_factors``
+    (default 1, 3, 10 times the MPC's own) whose predicted wander
+    (:func:`swingrt._core.velocity_wander`, the standard deviation of the 2 s mean velocity
+    on the white-box plant behind the largest lag) is within the twin's ``late_error`` over
+    ``wander_sigmas`` (3.29: the noise alone ends one flight in a thousand past it), else the
+    one that wanders least; a model flown with a raised noise carries it
+    (``diagnostics['swing_measurement_noise']``) and every MPC built on it assumes at
+    least that. ``control_check['wander']`` reports the pick's predicted wander on each
+    checked loop. Without a white-box (a model-only check) the twin is not flown. A flight
+    identified on the IMU's swing estimate (:func:`swing_source`) flies the twin on the
+    same estimate (its ``sensors`` set to the flight's swing source and
     estimator). ``check`` is :func:`check_plant`'s answer when the caller already has it
     (it is built from the same flight and settings otherwise)."""
     if result.search is None:
@@ -558,8 +560,8 @@ def select_for_control(
         "step": step,
         "bounds": None if bounds is None else dict(bounds),
         "twin_bounds": None if twin_bounds is None else dict(twin_bounds),
-        "noise_retry": noise_retry,
-        "noise_retry_wander": noise_retry_wander,
+        "noise_factors": None if noise_factors is None else list(noise_factors),
+        "wander_sigmas": wander_sigmas,
     }
     selection = {k: v for k, v in given.items() if v is not None} | {"plant_label": label}
     if isinstance(twin, str):

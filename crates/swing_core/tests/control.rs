@@ -1154,6 +1154,64 @@ fn velocity_wander_matches_a_seeded_noise_simulation() {
     assert!(w.is_infinite(), "{w}");
 }
 
+/// The swing channel's Kalman measurement noise is the selection's design variable: setting
+/// it (the velocity channel's unchanged) moves the wander the swing-sensor noise drives, a
+/// model carrying a raised one gives every MPC built on it at least that noise (the same
+/// loop as the setting, figure for figure), a larger setting is kept, and a non-positive
+/// one is refused by name.
+#[test]
+fn the_swing_measurement_noise_is_carried_by_the_model_and_lowers_the_wander() {
+    use swing_core::design::check::{velocity_wander, MeasurementNoise};
+    let model = truncated_flight_model();
+    let plant = delay_model(&params(0.2, 1.0), TS, 2, 3).unwrap();
+    let noise = MeasurementNoise {
+        velocity: 0.0,
+        swing: 0.01,
+        swing_rate: 0.0,
+    };
+    let wander = |m: &LinearModel, r: Option<f64>| {
+        let settings = MpcSettings {
+            kf_swing_measurement_noise: r,
+            ..unbounded()
+        };
+        let mpc = MpcController::new(m, settings).unwrap();
+        let w = velocity_wander(&mpc, m, &plant, 0.1, noise, 2.0).unwrap();
+        (w, mpc.settings().kf_swing_measurement_noise)
+    };
+    let ladder: Vec<f64> = [None, Some(0.03), Some(0.1)]
+        .into_iter()
+        .map(|r| wander(&model, r).0)
+        .collect();
+    // It moves the wander (not always down: on this truncated model 3x raises it, which is
+    // why the design takes the least-wandering factor when none meets the target).
+    assert!(
+        ladder.iter().all(|w| w.is_finite() && *w > 0.0)
+            && (ladder[1] - ladder[0]).abs() > 0.1 * ladder[0],
+        "{ladder:?}"
+    );
+    let mut carried = model.clone();
+    carried.diagnostics.swing_measurement_noise = Some(0.1);
+    let (w, r) = wander(&carried, None);
+    assert_eq!(r, Some(0.1));
+    assert!(
+        (w - ladder[2]).abs() <= 1e-12 * ladder[2],
+        "{w} vs {}",
+        ladder[2]
+    );
+    assert_eq!(wander(&carried, Some(0.3)).1, Some(0.3));
+    for bad in [0.0, -0.1, f64::NAN] {
+        let settings = MpcSettings {
+            kf_swing_measurement_noise: Some(bad),
+            ..MpcSettings::default()
+        };
+        let err = MpcController::new(&model, settings)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(err.contains("kf_swing_measurement_noise"), "{err}");
+    }
+}
+
 /// Measurement noise reaches the command attenuated: with white velocity (0.02 m/s) and
 /// swing (0.01 rad) noise, the default MPC on a truncated delay model flying the physical
 /// pendulum keeps the stationary RMS tick-to-tick setpoint change below 0.15 m/s² (PX4's

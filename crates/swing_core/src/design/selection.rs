@@ -254,15 +254,21 @@ pub struct SelectionSettings {
     pub bounds: CheckBounds,
     /// Pass bounds of the twin step flight (when a twin is given).
     pub twin_bounds: TwinBounds,
-    /// Factor by which a candidate's MPC raises its Kalman filter's measurement noise
-    /// (`kf_measurement_noise`) when the twin's hold shows the flight's sensor noise moving
-    /// the velocity more than `noise_retry_wander`; the candidate is then checked again
-    /// with it (1 = never), and flown so when that settles where the first did not, or
-    /// settles, damps as well and wanders less. The chosen model carries the raised noise
-    /// (`Diagnostics::measurement_noise`), and every MPC built on it assumes at least that.
-    pub noise_retry: f64,
-    /// Wander (`TwinHold::wander`, a fraction of the step) above which the retry is flown.
-    pub noise_retry_wander: f64,
+    /// The Kalman measurement noise as a design variable: the factors, in order, by which a
+    /// candidate's MPC may raise its filter's swing measurement noise
+    /// (`MpcSettings::swing_measurement_noise`) to
+    /// keep the flight's swing-sensor noise from wandering its velocity. Each candidate is
+    /// flown with the first factor whose predicted wander ([`check::velocity_wander`] on the
+    /// white-box plant behind the largest of the check's lags) is within the target (see
+    /// `wander_sigmas`), else with the one of least predicted wander. The chosen model
+    /// carries a raised noise (`Diagnostics::swing_measurement_noise`), and every MPC built on it
+    /// assumes at least that. `[1]`: the noise as set.
+    pub noise_factors: Vec<f64>,
+    /// How many standard deviations of the predicted wander must fit within the final-error
+    /// bound a flight is judged by (`TwinBounds::late_error`, 1 % of the step): 3.29, the
+    /// two-sided 0.1 % point of the normal, so the noise alone ends at most one flight in a
+    /// thousand past it (a flight's steady-state error is a 2 s mean, as the wander is).
+    pub wander_sigmas: f64,
     /// What the plant of the check is and where its parameters came from, written into the
     /// diagnostics as `control_check.plant` (e.g. `whitebox(payload mass 0.2 kg from thrust)`).
     pub plant_label: String,
@@ -290,13 +296,10 @@ impl Default for SelectionSettings {
             step: 2.0,
             bounds: CheckBounds::default(),
             twin_bounds: TwinBounds::default(),
-            // Three times the default (0.03 rad) halves what 0.005-0.01 rad of swing noise
-            // does to the velocity, for a little less damping; as a default for every model
-            // it costs more flights than it saves.
-            noise_retry: 3.0,
-            // A flight's steady-state error is a 2 s mean: with the wander at 0.3 % of the
-            // step, an error of 1 % (0.02 m/s on 2 m/s) takes a 3.3-sigma draw of the noise.
-            noise_retry_wander: 0.003,
+            // The default and up to ten times it: 0.005-0.01 rad of swing noise is filtered
+            // as what it is rather than as velocity noise of 0.01 m/s.
+            noise_factors: vec![1.0, 3.0, 10.0],
+            wander_sigmas: 3.29,
             plant_label: "whitebox".into(),
         }
     }
@@ -338,14 +341,18 @@ impl SelectionSettings {
         positive("twin_bounds.final_error", self.twin_bounds.final_error)?;
         positive("twin_bounds.wander", self.twin_bounds.wander)?;
         positive("twin_bounds.late_error", self.twin_bounds.late_error)?;
-        finite("noise_retry", self.noise_retry)?;
-        if self.noise_retry < 1.0 {
+        if self.noise_factors.is_empty()
+            || self
+                .noise_factors
+                .iter()
+                .any(|f| !(*f >= 1.0 && f.is_finite()))
+        {
             return Err(ConfigError::new(
-                "noise_retry",
-                "must be at least 1 (1 = never)",
+                "noise_factors",
+                "must be one or more finite factors of at least 1 (1 = the noise as set)",
             ));
         }
-        positive("noise_retry_wander", self.noise_retry_wander)?;
+        positive("wander_sigmas", self.wander_sigmas)?;
         non_negative("twin_bounds.swing_vs_pid", self.twin_bounds.swing_vs_pid)?;
         non_negative(
             "twin_bounds.swing_excess_min",
@@ -581,9 +588,9 @@ pub struct CheckedCandidate {
     pub figures: CandidateFigures,
     /// The verdict of [`judge`] on them.
     pub verdict: Verdict,
-    /// The raised Kalman measurement noise these figures were flown with, when the first
-    /// flight's wander asked for it (`SelectionSettings::noise_retry`).
-    pub measurement_noise: Option<f64>,
+    /// The raised Kalman measurement noise these figures were flown with, when the predicted
+    /// wander asked for it (`SelectionSettings::noise_factors`).
+    pub swing_measurement_noise: Option<f64>,
 }
 
 impl CheckedCandidate {
@@ -748,8 +755,9 @@ pub fn select_for_control(
     // One candidate's figures and their verdict: the twin's step flight, then the linear
     // plants, then the twin's hold, each only when `judge` admits every flight before it.
     // The MPC is designed once; every flight flies a fresh copy of it.
-    let evaluate = |model: &LinearModel| -> Result<(CandidateFigures, Verdict), ControlError> {
-        let mpc = MpcController::new(model, mpc_settings.clone())?;
+    let evaluate = |model: &LinearModel,
+                    mpc: MpcController|
+     -> Result<(CandidateFigures, Verdict), ControlError> {
         let step = match twin {
             Some(tw) => Some(tw.fly_with(mpc.fresh_copy()?)?),
             None => None,
@@ -772,9 +780,56 @@ pub fn select_for_control(
         }
         Ok((figures, judge(&figures, pid, settings)))
     };
-    let wander = |f: &CandidateFigures| f.hold.map_or(f64::INFINITY, |h| h.wander);
-    // One row of the table: refitted, screened when the search did not, flown (and flown
-    // again with the estimator's noise raised when its hold wandered). `None`: screened out.
+    // The Kalman measurement noise designed against the flight's swing noise: the first
+    // factor whose predicted wander is within the target, else the least wandering.
+    let swing_noise = plant
+        .diagnostics
+        .whitebox
+        .as_ref()
+        .and_then(|w| w.swing_noise)
+        .filter(|s| *s > 0.0);
+    let design_lag = lags.iter().copied().fold(0.0_f64, f64::max);
+    let target = settings.twin_bounds.late_error / settings.wander_sigmas;
+    let design_noise = |model: LinearModel| -> Result<(LinearModel, MpcController), ControlError> {
+        let mpc = MpcController::new(&model, mpc_settings.clone())?;
+        let Some(swing) = swing_noise else {
+            return Ok((model, mpc));
+        };
+        let noise = check::MeasurementNoise {
+            velocity: 0.0,
+            swing,
+            swing_rate: 0.0,
+        };
+        let base = mpc.settings().swing_measurement_noise();
+        let mut best: Option<(f64, f64, MpcController)> = None;
+        for &factor in &settings.noise_factors {
+            let designed = if factor > 1.0 {
+                mpc.with_swing_measurement_noise(base * factor)?
+            } else {
+                mpc.fresh_copy()?
+            };
+            let w =
+                check::velocity_wander(&designed, &model, plant, design_lag, noise, WANDER_SPAN)?
+                    / settings.step.abs();
+            let within = w <= target;
+            if best.as_ref().is_none_or(|(b, _, _)| w < *b) || within {
+                best = Some((w, factor, designed));
+            }
+            if within {
+                break;
+            }
+        }
+        let Some((_, factor, designed)) = best else {
+            return Ok((model, mpc));
+        };
+        let mut model = model;
+        if factor > 1.0 {
+            model.diagnostics.swing_measurement_noise = Some(base * factor);
+        }
+        Ok((model, designed))
+    };
+    // One row of the table: refitted, screened when the search did not, its estimator's
+    // swing noise designed, flown. `None`: screened out.
     let fly_row = |row: &&Candidate| -> Result<Option<Flown>, ControlError> {
         let model = refit(row.delays, row.rank)?;
         let mut screen_verdict = None;
@@ -787,32 +842,15 @@ pub fn select_for_control(
                 screen_verdict = Some(verdict);
             }
         }
-        let mut model = model;
-        let (mut figures, mut verdict) = evaluate(&model)?;
-        // Only a candidate that settled up to its hold has a wander to retry.
-        let noisy = figures
-            .hold
-            .is_some_and(|h| h.wander > settings.noise_retry_wander);
-        if noisy && settings.noise_retry > 1.0 {
-            let mut retry = model.clone();
-            retry.diagnostics.measurement_noise =
-                Some(mpc_settings.kf_measurement_noise * settings.noise_retry);
-            let (again, again_verdict) = evaluate(&retry)?;
-            let better = again_verdict.settled()
-                && (!verdict.settled()
-                    || ((again_verdict.damps() || !verdict.damps())
-                        && wander(&again) < wander(&figures)));
-            if better {
-                (model, figures, verdict) = (retry, again, again_verdict);
-            }
-        }
+        let (model, mpc) = design_noise(model)?;
+        let (figures, verdict) = evaluate(&model, mpc)?;
         let candidate = CheckedCandidate {
             delays: row.delays,
             rank: row.rank,
             nmae: row.nmae,
             figures,
             verdict,
-            measurement_noise: model.diagnostics.measurement_noise,
+            swing_measurement_noise: model.diagnostics.swing_measurement_noise,
         };
         Ok(Some(Flown {
             candidate,
@@ -863,7 +901,7 @@ pub fn select_for_control(
         None => {
             let c = &checked[pick_index];
             let mut m = refit(c.delays, c.rank)?;
-            m.diagnostics.measurement_noise = c.measurement_noise;
+            m.diagnostics.swing_measurement_noise = c.swing_measurement_noise;
             m
         }
     };
@@ -973,7 +1011,7 @@ fn checked_json(c: &CheckedCandidate) -> serde_json::Value {
         "final_error": f.worst.final_error,
         "hold_drift": f.worst.hold_drift,
         "twin": f.twin.as_ref().map(flight_json),
-        "measurement_noise": c.measurement_noise,
+        "swing_measurement_noise": c.swing_measurement_noise,
         "hold": f.hold.map(|h| json!({"wander": h.wander, "late_error": h.late_error})),
     })
 }
@@ -1063,7 +1101,7 @@ mod tests {
             nmae: 0.1,
             figures,
             verdict: verdict(&figures),
-            measurement_noise: None,
+            swing_measurement_noise: None,
         }
     }
 

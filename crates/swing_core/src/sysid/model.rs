@@ -123,11 +123,16 @@ pub struct Diagnostics {
     /// White-box estimates (method `whitebox`).
     #[serde(default)]
     pub whitebox: Option<WhiteboxEstimates>,
-    /// Kalman measurement noise std [m/s, rad] that an MPC on this model assumes at least:
-    /// set by the control-relevant selection when the flight's sensor noise, fed through
-    /// the MPC with the default, moved the twin's velocity beyond its bound.
+    /// Kalman measurement noise std of every channel [m/s, rad] that an MPC on this model
+    /// assumes at least, given by the user or a model file; the selection designs only the
+    /// swing channels' (`swing_measurement_noise`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub measurement_noise: Option<f64>,
+    /// Kalman measurement noise std of the swing channels an MPC on this model assumes at
+    /// least [rad]: set by the control-relevant selection's noise design, against the
+    /// flight's swing-sensor noise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub swing_measurement_noise: Option<f64>,
     /// Anything else callers attach (search table, sweep settings …).
     #[serde(flatten)]
     pub extra: serde_json::Map<String, serde_json::Value>,
@@ -314,11 +319,19 @@ impl LinearModel {
                 return Err(model(format!("{name} contains a non-finite value")));
             }
         }
-        if let Some(r) = self.diagnostics.measurement_noise {
-            if !(r.is_finite() && r > 0.0) {
-                return Err(model(format!(
-                    "diagnostics.measurement_noise must be a positive number, not {r}"
-                )));
+        for (name, r) in [
+            ("measurement_noise", self.diagnostics.measurement_noise),
+            (
+                "swing_measurement_noise",
+                self.diagnostics.swing_measurement_noise,
+            ),
+        ] {
+            if let Some(r) = r {
+                if !(r.is_finite() && r > 0.0) {
+                    return Err(model(format!(
+                        "diagnostics.{name} must be a positive number, not {r}"
+                    )));
+                }
             }
         }
         Ok(())

@@ -81,6 +81,10 @@ pub struct MpcSettings {
     /// Kalman measurement noise std [state units: m/s, rad]; a model that carries a
     /// larger one (`Diagnostics::measurement_noise`, from the selection) raises it.
     pub kf_measurement_noise: f64,
+    /// Kalman measurement noise std of the swing channels [rad, rad/s] (none: the same as
+    /// `kf_measurement_noise`); a model that carries a larger one
+    /// (`Diagnostics::swing_measurement_noise`, from the selection's noise design) raises it.
+    pub kf_swing_measurement_noise: Option<f64>,
     /// QP solver for ticks with an active bound: `clarabel` or `active_set`.
     pub solver: QpSolverKind,
     /// Use the measured delay stack as the state and estimate only the disturbances
@@ -117,6 +121,7 @@ impl Default for MpcSettings {
             // lets a wind step settle.
             kf_swing_disturbance_scale: 0.1,
             kf_measurement_noise: 0.01,
+            kf_swing_measurement_noise: None,
             solver: QpSolverKind::ActiveSet,
             measured_state: false,
         }
@@ -124,6 +129,12 @@ impl Default for MpcSettings {
 }
 
 impl MpcSettings {
+    /// The Kalman measurement noise std of the swing channels in effect.
+    pub fn swing_measurement_noise(&self) -> f64 {
+        self.kf_swing_measurement_noise
+            .unwrap_or(self.kf_measurement_noise)
+    }
+
     /// Check horizons, weights and limits.
     pub fn validate(&self) -> Result<(), ConfigError> {
         if self.horizon == 0 || self.horizon > 2000 {
@@ -165,6 +176,9 @@ impl MpcSettings {
             self.kf_swing_disturbance_scale,
         )?;
         positive("kf_measurement_noise", self.kf_measurement_noise)?;
+        if let Some(r) = self.kf_swing_measurement_noise {
+            positive("kf_swing_measurement_noise", r)?;
+        }
         Ok(())
     }
 }
@@ -285,7 +299,27 @@ pub(crate) fn settings_for(
         positive("measurement_noise", r)?;
         settings.kf_measurement_noise = settings.kf_measurement_noise.max(r);
     }
+    if let Some(r) = model.diagnostics.swing_measurement_noise {
+        positive("swing_measurement_noise", r)?;
+        let own = settings.swing_measurement_noise();
+        settings.kf_swing_measurement_noise = Some(own.max(r));
+    }
     Ok(settings)
+}
+
+/// The Kalman measurement noise variance of each model state of the newest frame: the
+/// velocity's `kf_measurement_noise`, the swing's and its rate's
+/// [`MpcSettings::swing_measurement_noise`].
+pub(crate) fn measurement_variances(settings: &MpcSettings, sources: &[Measured]) -> Vec<f64> {
+    sources
+        .iter()
+        .map(|s| match s {
+            Measured::V(_) => settings.kf_measurement_noise.powi(2),
+            Measured::Swing(_) | Measured::SwingRate(_) => {
+                settings.swing_measurement_noise().powi(2)
+            }
+        })
+        .collect()
 }
 
 /// What each model state of the newest frame measures, then each axis' velocity index and
@@ -473,7 +507,9 @@ impl MpcController {
         let w = DMatrix::from_diagonal(&DVector::from_vec(process_noise(
             &settings, n, nm, aug.nd, &sources,
         )));
-        let v = DMatrix::<f64>::identity(n, n) * settings.kf_measurement_noise.powi(2);
+        let v = DMatrix::from_diagonal(&DVector::from_vec(measurement_variances(
+            &settings, &sources,
+        )));
         let kf = SteadyStateKalman::new(aug.a.clone(), aug.b.clone(), aug.c.clone(), n, &w, &v)?;
         let bounds = Bounds {
             u_max: settings.acc_max,
@@ -506,6 +542,35 @@ impl MpcController {
             pred: DVector::zeros(ny),
             initialized: false,
         })
+    }
+
+    /// This design with the Kalman filter's swing-channel measurement noise set to `r`
+    /// (as [`Self::new`] on a model carrying it would build it, not yet flown): only the
+    /// filter is designed again; the condensed QP, which does not depend on it, is kept.
+    pub fn with_swing_measurement_noise(&self, r: f64) -> Result<Self, ControlError> {
+        positive("kf_swing_measurement_noise", r)?;
+        let mut out = self.fresh_copy()?;
+        out.settings.kf_swing_measurement_noise = Some(r);
+        let w = DMatrix::from_diagonal(&DVector::from_vec(process_noise(
+            &out.settings,
+            out.n,
+            out.aug.nm,
+            out.aug.nd,
+            &out.sources,
+        )));
+        let v = DMatrix::from_diagonal(&DVector::from_vec(measurement_variances(
+            &out.settings,
+            &out.sources,
+        )));
+        out.kf = SteadyStateKalman::new(
+            out.aug.a.clone(),
+            out.aug.b.clone(),
+            out.aug.c.clone(),
+            out.n,
+            &w,
+            &v,
+        )?;
+        Ok(out)
     }
 
     /// A controller of the same design that has not flown yet, as [`Self::new`] returns it

@@ -43,8 +43,8 @@ use super::condense::Augmented;
 use super::estimator::SteadyStateKalman;
 use super::qp::Bounds;
 use super::{
-    check_model, frame_sources, process_noise, push_frame, qp_backend, settings_for, solve_bounded,
-    Backend, MpcSettings,
+    check_model, frame_sources, measurement_variances, process_noise, push_frame, qp_backend,
+    settings_for, solve_bounded, Backend, MpcSettings,
 };
 use crate::config::{positive, ConfigError};
 use crate::control::layout::Measured;
@@ -411,10 +411,7 @@ impl TrackingMpc {
         w.extend(process_noise(&settings, n, nm0, aug.nd, &sources));
         let wm = DMatrix::from_diagonal(&DVector::from_vec(w));
         let mut v = vec![tracking.kf_position_noise.powi(2); m];
-        v.extend(std::iter::repeat_n(
-            settings.kf_measurement_noise.powi(2),
-            n,
-        ));
+        v.extend(measurement_variances(&settings, &sources));
         let vm = DMatrix::from_diagonal(&DVector::from_vec(v));
         let kf = SteadyStateKalman::new(a, b, c, m + n, &wm, &vm)?;
         let bounds = Bounds {
