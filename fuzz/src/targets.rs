@@ -838,6 +838,7 @@ fn mpc_inner(u: &mut Unstructured<'_>) -> AResult<()> {
         kf_disturbance_noise: positive(u, 0.02)?,
         kf_swing_disturbance_scale: positive(u, 0.1)?,
         kf_measurement_noise: positive(u, 0.01)?,
+        kf_swing_measurement_noise: opt(u, |u| positive(u, 0.01))?,
         solver: *u.choose(&[QpSolverKind::ActiveSet, QpSolverKind::Clarabel])?,
         measured_state: u.arbitrary()?,
     };
