@@ -514,7 +514,7 @@ pub fn settings(data: &[u8]) {
             }
         }
         _ => {
-            // StepCheckSettings has no serde form: its four numbers from the bytes.
+            // StepCheckSettings has no serde form: its five numbers from the bytes.
             let mut u = Unstructured::new(rest);
             let Ok(check) = (|| -> AResult<StepCheckSettings> {
                 Ok(StepCheckSettings {
@@ -522,6 +522,7 @@ pub fn settings(data: &[u8]) {
                     t_step: float(&mut u)?,
                     duration: float(&mut u)?,
                     input_lag: float(&mut u)?,
+                    input_delay: float(&mut u)?,
                 })
             })() else {
                 return;

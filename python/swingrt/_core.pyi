@@ -487,6 +487,7 @@ def mpc_step_check(
     t_step: float = 2.0,
     duration: float = 20.0,
     input_lags: list[float] = ...,
+    input_delay: float = 0.0,
 ) -> list[dict[str, float]]: ...
 def velocity_wander(
     model: LinearModel,

@@ -488,6 +488,7 @@ def select_for_control(
     passers: int | None = None,
     look_ahead: int | None = None,
     input_lags: Sequence[float] | None = None,
+    input_delays: Sequence[float] | None = None,
     flight_lag: bool | None = None,
     vehicle_drag: Sequence[float] | None = None,
     step: float | None = None,
@@ -508,7 +509,9 @@ def select_for_control(
     a ``step`` m/s step, hold (unset settings take the core's defaults: 300 candidates, lags
     0 and 0.1 s, drags 0.12 and 0.4 /s, a 2 m/s step), and with ``flight_lag`` (off by
     default) also behind the attitude lag the flight shows (``diagnostics['whitebox']
-    ['attitude_lag']``: the acceleration command against the measured acceleration); one
+    ['attitude_lag']``: the acceleration command against the measured acceleration), and
+    with no lag behind each dead time of ``input_delays`` [s] (the delay margin at the
+    acceleration input); one
     within ``bounds`` (fractions of
     the step: ``overshoot``, ``final_error``, ``hold_drift``) passes, else the least
     violating is taken. The
@@ -555,6 +558,7 @@ def select_for_control(
         "passers": passers,
         "look_ahead": look_ahead,
         "input_lags": None if input_lags is None else list(input_lags),
+        "input_delays": None if input_delays is None else list(input_delays),
         "flight_lag": flight_lag,
         "vehicle_drag": None if vehicle_drag is None else list(vehicle_drag),
         "step": step,

@@ -898,6 +898,7 @@ fn step_check_on_its_own_model_matches_an_independent_loop() {
         t_step: 1.0,
         duration: 20.0,
         input_lag: 0.0,
+        input_delay: 0.0,
     };
     let r = mpc_step_check(&m, MpcSettings::default(), &m, &check).unwrap();
     // Reference: the same controller and plant stepped by this file's own loop.
@@ -989,6 +990,14 @@ fn step_check_rejects_mismatched_plants_and_bad_settings() {
         },
         StepCheckSettings {
             input_lag: -1.0,
+            ..Default::default()
+        },
+        StepCheckSettings {
+            input_delay: -0.03,
+            ..Default::default()
+        },
+        StepCheckSettings {
+            input_delay: 1e9,
             ..Default::default()
         },
     ] {
@@ -1293,4 +1302,90 @@ fn step_check_rejects_an_unstable_linear_loop_before_flying() {
     }
     // A bad lag factor is a typed error.
     assert!(closed_loop_radius(&mpc, &m, &m, 1.5).is_err());
+}
+
+/// A dead time is checked as the flown loop sees it: the loop matrix with `delay` ticks
+/// (`actuated_stable`) answers as a loop flown here, independently, with the commands held
+/// in a queue for those ticks, settling below the first unstable delay and diverging above
+/// it; and the step check's own queue flies exactly that local loop.
+#[test]
+fn a_dead_time_is_checked_as_a_queue_of_commands_flies() {
+    use std::collections::VecDeque;
+    use swing_core::design::check::{
+        actuated_noise_loop, actuated_stable, closed_loop_radius, lagged_noise_loop,
+        step_check_with, StepCheckSettings,
+    };
+    let m = model(0.2, 1.0, 8);
+    // Bounds that never act: the constrained MPC is its linear law.
+    let settings = MpcSettings {
+        acc_max: None,
+        ..MpcSettings::default()
+    };
+    let mpc = MpcController::new(&m, settings.clone()).unwrap();
+    // Fly the MPC on its own model behind a queue of `delay` ticks: |v − step| at the end
+    // over its value at 10 s.
+    let fly = |delay: usize, ticks: usize| -> (f64, f64) {
+        let mut c = MpcController::new(&m, settings.clone()).unwrap();
+        let mut lin = LinearPlant::new(&m).unwrap();
+        let mut state = vec![AxisState::default(); 1];
+        let mut out = vec![0.0];
+        c.reset(&state, &out);
+        let mut queue: VecDeque<f64> = std::iter::repeat_n(0.0, delay).collect();
+        let mut at_10 = f64::NAN;
+        for k in 0..ticks {
+            lin.measure(&mut state);
+            if k == (10.0 / TS) as usize {
+                at_10 = (state[0].v - 1.0).abs();
+            }
+            if !state[0].v.is_finite() || state[0].v.abs() > 1e6 {
+                return (f64::INFINITY, at_10);
+            }
+            c.step(&state, &[1.0], &mut out).unwrap();
+            queue.push_back(out[0]);
+            lin.step(&[queue.pop_front().unwrap()]);
+        }
+        lin.measure(&mut state);
+        ((state[0].v - 1.0).abs(), at_10)
+    };
+    let first_unstable = (0..60)
+        .find(|&d| !actuated_stable(&mpc, &m, &m, 0.0, d).unwrap())
+        .expect("enough dead time destabilises any loop");
+    assert!(first_unstable >= 2, "{first_unstable}");
+    let (settled, _) = fly(first_unstable - 1, 4000);
+    assert!(settled < 1e-3, "{} ticks: {settled}", first_unstable - 1);
+    let (late, at_10) = fly(first_unstable + 1, 4000);
+    assert!(
+        late > 10.0 * at_10,
+        "{} ticks: {late} vs {at_10}",
+        first_unstable + 1
+    );
+    // No delay is the lag's loop; a delay adds one state per tick and input.
+    let plain = lagged_noise_loop(&mpc, &m, &m, 0.7).unwrap();
+    assert_eq!(
+        actuated_noise_loop(&mpc, &m, &m, 0.7, 0).unwrap().a,
+        plain.a
+    );
+    let delayed = actuated_noise_loop(&mpc, &m, &m, 0.7, 3).unwrap();
+    assert_eq!(delayed.a.nrows(), plain.a.nrows() + 3);
+    assert!(closed_loop_radius(&mpc, &m, &m, 0.0).unwrap() < 1.0);
+    // The step check flies the same queue: its final error is the local loop's, to the bit.
+    let d = first_unstable - 1;
+    let check = StepCheckSettings {
+        step: 1.0,
+        t_step: 0.0,
+        duration: 4000.0 * TS,
+        input_delay: d as f64 * TS,
+        ..StepCheckSettings::default()
+    };
+    let mut reused = MpcController::new(&m, settings.clone()).unwrap();
+    let r = step_check_with(&mut reused, &m, &m, &check).unwrap();
+    assert_eq!(r.final_error, fly(d, 4000).0, "{r:?}");
+    let unstable = StepCheckSettings {
+        input_delay: (first_unstable + 1) as f64 * TS,
+        ..check
+    };
+    assert!(step_check_with(&mut reused, &m, &m, &unstable)
+        .unwrap()
+        .final_error
+        .is_infinite());
 }

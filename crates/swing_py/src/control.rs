@@ -534,11 +534,11 @@ fn velocity_wander(
 }
 
 /// Closed-loop step checks of the MPC on `model_json` flying each linear plant of
-/// `plant_jsons` behind each of `input_lags` (see `swing_core::design::check`; the MPC is
+/// `plant_jsons` behind each of `input_lags` after a dead time of `input_delay` [s] (see `swing_core::design::check`; the MPC is
 /// designed once): a list, plant-major, of dicts of `overshoot`, `final_error`,
 /// `hold_drift` as fractions of the step.
 #[pyfunction]
-#[pyo3(signature = (model, plants, settings=None, step=2.0, t_step=2.0, duration=20.0, input_lags=vec![0.0]))]
+#[pyo3(signature = (model, plants, settings=None, step=2.0, t_step=2.0, duration=20.0, input_lags=vec![0.0], input_delay=0.0))]
 #[allow(clippy::too_many_arguments)]
 fn mpc_step_check<'py>(
     py: Python<'py>,
@@ -549,6 +549,7 @@ fn mpc_step_check<'py>(
     t_step: f64,
     duration: f64,
     input_lags: Vec<f64>,
+    input_delay: f64,
 ) -> PyResult<Vec<Bound<'py, PyDict>>> {
     let model = model.inner.clone();
     let plants: Vec<_> = plants.iter().map(|p| p.inner.clone()).collect();
@@ -564,6 +565,7 @@ fn mpc_step_check<'py>(
                         t_step,
                         duration,
                         input_lag,
+                        input_delay,
                     };
                     out.push(check::step_check_with(&mut mpc, &model, plant, &check)?);
                 }

@@ -43,6 +43,9 @@ pub struct StepCheckSettings {
     pub duration: f64,
     /// Time constant of a first-order lag between the controller and the plant [s] (0 = none).
     pub input_lag: f64,
+    /// Pure delay of the command before the lag [s], rounded to whole ticks of the plant's
+    /// `dt` ([`delay_ticks`]; 0 = none).
+    pub input_delay: f64,
 }
 
 impl Default for StepCheckSettings {
@@ -52,6 +55,7 @@ impl Default for StepCheckSettings {
             t_step: 2.0,
             duration: 20.0,
             input_lag: 0.0,
+            input_delay: 0.0,
         }
     }
 }
@@ -66,6 +70,7 @@ impl StepCheckSettings {
         non_negative("t_step", self.t_step)?;
         positive("duration", self.duration)?;
         non_negative("input_lag", self.input_lag)?;
+        non_negative("input_delay", self.input_delay)?;
         if self.t_step >= self.duration {
             return Err(ConfigError::new(
                 "t_step",
@@ -166,6 +171,24 @@ impl StepCheck {
     }
 }
 
+/// Longest dead time a check takes, in ticks (3 s at 30 ms): the loop's matrix grows by one
+/// state per tick and input, so an absurd delay is refused, not allocated.
+pub const MAX_DELAY_TICKS: usize = 100;
+
+/// A pure delay of `delay` seconds as whole ticks of `dt` (nearest; at most
+/// [`MAX_DELAY_TICKS`]).
+pub fn delay_ticks(delay: f64, dt: f64) -> Result<usize, ConfigError> {
+    non_negative("input_delay", delay)?;
+    let ticks = (delay / dt).round();
+    if !ticks.is_finite() || ticks > MAX_DELAY_TICKS as f64 {
+        return Err(ConfigError::new(
+            "input_delay",
+            format!("{delay} s at dt = {dt} s is too many ticks"),
+        ));
+    }
+    Ok(ticks as usize)
+}
+
 /// Check that `plant` can stand in for the controller's model: same inputs and sample time.
 fn check_plant(controller: &LinearModel, plant: &LinearModel) -> Result<(), ControlError> {
     if controller.inputs != plant.inputs {
@@ -197,30 +220,39 @@ pub fn mpc_step_check(
 }
 
 /// Worst figures of `mpc` (designed on `controller`, not flown; each loop flies a fresh
-/// copy), flying a `step` [m/s] on each of `plants` behind each of `input_lags` [s]: the
-/// one worst-case loop of the offline selection and the adaptive swap. The loops are
-/// independent and flown side by side ([`crate::design::parallel`]).
+/// copy), flying a `step` [m/s] on each of `plants` behind each of `input_lags` [s] and,
+/// with no lag, behind each of the pure `input_delays` [s]: the one worst-case loop of the
+/// offline selection and the adaptive swap. The loops are independent and flown side by
+/// side ([`crate::design::parallel`]).
 pub fn worst_step_check(
     mpc: &MpcController,
     controller: &LinearModel,
     plants: &[LinearModel],
     input_lags: &[f64],
+    input_delays: &[f64],
     step: f64,
 ) -> Result<StepCheck, ControlError> {
-    let mut loops = Vec::with_capacity(plants.len() * input_lags.len());
+    let actuators: Vec<(f64, f64)> = input_lags
+        .iter()
+        .map(|&l| (l, 0.0))
+        .chain(input_delays.iter().map(|&d| (0.0, d)))
+        .collect();
+    let mut loops = Vec::with_capacity(plants.len() * actuators.len());
     for plant in plants {
-        for &input_lag in input_lags {
-            loops.push((plant, input_lag, mpc.fresh_copy()?));
+        for &actuator in &actuators {
+            loops.push((plant, actuator, mpc.fresh_copy()?));
         }
     }
-    let checks = crate::design::parallel::map(loops, |(plant, input_lag, mut mpc)| {
-        let check = StepCheckSettings {
-            step,
-            input_lag,
-            ..StepCheckSettings::default()
-        };
-        step_check_with(&mut mpc, controller, plant, &check)
-    });
+    let checks =
+        crate::design::parallel::map(loops, |(plant, (input_lag, input_delay), mut mpc)| {
+            let check = StepCheckSettings {
+                step,
+                input_lag,
+                input_delay,
+                ..StepCheckSettings::default()
+            };
+            step_check_with(&mut mpc, controller, plant, &check)
+        });
     let mut worst = StepCheck {
         overshoot: f64::NEG_INFINITY,
         final_error: f64::NEG_INFINITY,
@@ -266,10 +298,11 @@ pub fn step_check_with(
     } else {
         0.0
     };
+    let delay = delay_ticks(check.input_delay, dt)?;
     let step = check.step.abs();
     // An unconstrained loop with an eigenvalue outside the unit circle grows into a limit
     // cycle against the acceleration bound in flight, however slowly it shows in 20 s.
-    if !closed_loop_stable(mpc, controller, plant, lag)? {
+    if !actuated_stable(mpc, controller, plant, lag, delay)? {
         return Ok(StepCheck {
             overshoot: f64::INFINITY,
             final_error: f64::INFINITY,
@@ -277,6 +310,9 @@ pub fn step_check_with(
         });
     }
     let mut applied = vec![0.0; m];
+    // The commands in flight: the oldest, `delay` ticks back, reaches the lag next.
+    let mut in_flight: std::collections::VecDeque<Vec<f64>> =
+        std::iter::repeat_n(vec![0.0; m], delay).collect();
     let mut state = vec![AxisState::default(); m];
     let mut vel_ref = vec![0.0; m];
     let mut out = vec![0.0; m];
@@ -303,8 +339,10 @@ pub fn step_check_with(
             vel_ref[a] = if k >= step_tick { check.step } else { 0.0 };
         }
         mpc.step(&state, &vel_ref, &mut out)?;
+        in_flight.push_back(out.clone());
+        let arriving = in_flight.pop_front().unwrap_or_else(|| out.clone());
         for a in 0..m {
-            applied[a] = lag * applied[a] + (1.0 - lag) * out[a];
+            applied[a] = lag * applied[a] + (1.0 - lag) * arriving[a];
         }
         lin.step(&applied);
     }
@@ -381,6 +419,19 @@ pub fn lagged_noise_loop(
     plant: &LinearModel,
     lag: f64,
 ) -> Result<NoiseLoop, ControlError> {
+    actuated_noise_loop(mpc, controller, plant, lag, 0)
+}
+
+/// [`lagged_noise_loop`] with the command also delayed by `delay` whole ticks before the
+/// lag: the commands in flight w₁ … w_d (w₁⁺ = u, wᵢ⁺ = wᵢ₋₁) follow the lag's state in X,
+/// and w_d drives the lag (u itself when `delay` = 0).
+pub fn actuated_noise_loop(
+    mpc: &MpcController,
+    controller: &LinearModel,
+    plant: &LinearModel,
+    lag: f64,
+    delay: usize,
+) -> Result<NoiseLoop, ControlError> {
     check_plant(controller, plant)?;
     if !(0.0..1.0).contains(&lag) {
         return Err(
@@ -399,24 +450,48 @@ pub fn lagged_noise_loop(
     let nzp = plant.a.nrows();
     let pn = plant.states.len();
     let mp = plant.b.ncols();
-    // Plant with the lag: [z; a]⁺ = [A  λB; 0  λI] [z; a] + [(1 − λ)B; (1 − λ)I] u.
-    let np = if lag > 0.0 { nzp + mp } else { nzp };
+    if delay > MAX_DELAY_TICKS {
+        return Err(ConfigError::new("input_delay", format!("{delay} ticks is too many")).into());
+    }
+    // Actuator states after z: the lag's a (with a lag), then the commands in flight w.
+    // With o = S s + D u the command leaving the delay (w_d, or u with no delay), the lag
+    // is a⁺ = λ a + (1 − λ) o and the plant is driven by a⁺ (by o with no lag).
+    let na = if lag > 0.0 { mp } else { 0 };
+    let (ia, iw) = (nzp, nzp + na);
+    let np = nzp + na + delay * mp;
+    let mut out_s = DMatrix::<f64>::zeros(mp, np);
+    let mut out_u = DMatrix::<f64>::zeros(mp, mp);
+    if delay > 0 {
+        for i in 0..mp {
+            out_s[(i, iw + (delay - 1) * mp + i)] = 1.0;
+        }
+    } else {
+        out_u.fill_with_identity();
+    }
+    let (mut drive_s, mut drive_u) = (&out_s * (1.0 - lag), &out_u * (1.0 - lag));
+    if lag > 0.0 {
+        for i in 0..mp {
+            drive_s[(i, ia + i)] += lag;
+        }
+    } else {
+        drive_s = out_s;
+        drive_u = out_u;
+    }
     let mut plant_a = DMatrix::<f64>::zeros(np, np);
     let mut plant_b = DMatrix::<f64>::zeros(np, mp);
     plant_a.view_mut((0, 0), (nzp, nzp)).copy_from(&plant.a);
+    plant_a.rows_mut(0, nzp).add_assign(&(&plant.b * &drive_s));
+    plant_b.rows_mut(0, nzp).copy_from(&(&plant.b * &drive_u));
     if lag > 0.0 {
-        plant_a
-            .view_mut((0, nzp), (nzp, mp))
-            .copy_from(&(&plant.b * lag));
-        plant_b
-            .view_mut((0, 0), (nzp, mp))
-            .copy_from(&(&plant.b * (1.0 - lag)));
-        for i in 0..mp {
-            plant_a[(nzp + i, nzp + i)] = lag;
-            plant_b[(nzp + i, i)] = 1.0 - lag;
+        plant_a.rows_mut(ia, mp).copy_from(&drive_s);
+        plant_b.rows_mut(ia, mp).copy_from(&drive_u);
+    }
+    for i in 0..delay * mp {
+        if i < mp {
+            plant_b[(iw + i, i)] = 1.0;
+        } else {
+            plant_a[(iw + i, iw + i - mp)] = 1.0;
         }
-    } else {
-        plant_b.copy_from(&plant.b);
     }
     if layout.len() != m {
         return Err(ControlError::Model(format!(
@@ -536,7 +611,19 @@ pub fn closed_loop_stable(
     plant: &LinearModel,
     lag: f64,
 ) -> Result<bool, ControlError> {
-    let nl = lagged_noise_loop(mpc, controller, plant, lag)?;
+    actuated_stable(mpc, controller, plant, lag, 0)
+}
+
+/// [`closed_loop_stable`] with the command also delayed by `delay` ticks
+/// ([`actuated_noise_loop`]).
+pub fn actuated_stable(
+    mpc: &MpcController,
+    controller: &LinearModel,
+    plant: &LinearModel,
+    lag: f64,
+    delay: usize,
+) -> Result<bool, ControlError> {
+    let nl = actuated_noise_loop(mpc, controller, plant, lag, delay)?;
     crate::linalg::schur_stable(&nl.a)
         .ok_or_else(|| ControlError::Synthesis("closed-loop eigenvalues did not converge".into()))
 }

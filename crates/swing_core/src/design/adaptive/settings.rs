@@ -34,6 +34,10 @@ pub struct AdaptiveSettings {
     pub check_step: f64,
     /// Input lags of the closed-loop check [s] (0 = none).
     pub input_lags: Vec<f64>,
+    /// Pure delays of the command the check's loop must also stand, with no lag [s]: the
+    /// offline selection's delay margin (`SelectionSettings::input_delays`; off by default,
+    /// as there).
+    pub input_delays: Vec<f64>,
     /// Linear vehicle drag added to the candidate as a second check plant [1/s] (0 = only
     /// the candidate itself).
     pub check_drag: f64,
@@ -134,6 +138,7 @@ impl Default for AdaptiveSettings {
             retry_samples: 60,
             check_step: 2.0,
             input_lags: vec![0.0, 0.1],
+            input_delays: Vec::new(),
             check_drag: 0.12,
             bounds: CheckBounds::default(),
             max_spectral_radius: 1.005,
@@ -165,6 +170,9 @@ impl AdaptiveSettings {
         }
         for (i, l) in self.input_lags.iter().enumerate() {
             non_negative(&format!("input_lags[{i}]"), *l)?;
+        }
+        for (i, d) in self.input_delays.iter().enumerate() {
+            non_negative(&format!("input_delays[{i}]"), *d)?;
         }
         non_negative("check_drag", self.check_drag)?;
         for (name, v) in [

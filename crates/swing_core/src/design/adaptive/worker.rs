@@ -121,6 +121,7 @@ impl Synthesizer {
             &bare,
             &plants,
             &self.settings.input_lags,
+            &self.settings.input_delays,
             self.settings.check_step,
         )
         .map_err(|e| e.to_string())?;
