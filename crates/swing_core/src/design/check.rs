@@ -339,10 +339,15 @@ pub fn step_check_with(
             vel_ref[a] = if k >= step_tick { check.step } else { 0.0 };
         }
         mpc.step(&state, &vel_ref, &mut out)?;
-        in_flight.push_back(out.clone());
-        let arriving = in_flight.pop_front().unwrap_or_else(|| out.clone());
+        // The new command joins the queue in the oldest's place and the oldest is applied
+        // (with no delay the command itself): no allocation per tick. `out` is written
+        // whole by the next step.
+        if let Some(mut oldest) = in_flight.pop_front() {
+            std::mem::swap(&mut oldest, &mut out);
+            in_flight.push_back(oldest);
+        }
         for a in 0..m {
-            applied[a] = lag * applied[a] + (1.0 - lag) * arriving[a];
+            applied[a] = lag * applied[a] + (1.0 - lag) * out[a];
         }
         lin.step(&applied);
     }
@@ -468,14 +473,12 @@ pub fn actuated_noise_loop(
     } else {
         out_u.fill_with_identity();
     }
-    let (mut drive_s, mut drive_u) = (&out_s * (1.0 - lag), &out_u * (1.0 - lag));
+    // The plant's drive: λ a + (1 − λ) o (o itself with no lag, λ = 0).
+    let (mut drive_s, drive_u) = (out_s * (1.0 - lag), out_u * (1.0 - lag));
     if lag > 0.0 {
         for i in 0..mp {
             drive_s[(i, ia + i)] += lag;
         }
-    } else {
-        drive_s = out_s;
-        drive_u = out_u;
     }
     let mut plant_a = DMatrix::<f64>::zeros(np, np);
     let mut plant_b = DMatrix::<f64>::zeros(np, mp);
