@@ -198,7 +198,12 @@ def test_a_sample_that_cannot_be_identified_is_a_row_not_a_crash():
         assert math.isnan(by[c]["peak_swing_deg"]) and by[c]["q"] is None
 
 
-def _vehicle(identify: dict | None = None, scale: float = 0.7, payload: float = 0.05) -> dict:
+def _vehicle(
+    identify: dict | None = None,
+    scale: float = 0.7,
+    payload: float = 0.05,
+    selection: dict | None = None,
+) -> dict:
     """A vehicle of ``scale`` x the built-in mass carrying ``payload`` kg on 1 m, in both
     flights (default: the lightest payload of the robustness study under a 0.7x vehicle)."""
     return {
@@ -210,6 +215,7 @@ def _vehicle(identify: dict | None = None, scale: float = 0.7, payload: float = 
             "duration": 20.0,
             "training_duration": 120.0,
             **({"identify": identify} if identify else {}),
+            **({"selection": selection} if selection else {}),
         },
         "vary": {
             "vehicle.mass": {"dist": "fixed", "value": scale * 0.952},
@@ -245,15 +251,31 @@ def test_a_white_box_that_fails_does_not_stop_the_data_driven_model():
 @pytest.mark.parametrize("twin", ["off", "builtin"])
 def test_a_study_says_which_twin_its_selection_flies(tmp_path, twin):
     """``[identify] twin``: ``off`` flies none, ``builtin`` the built-in vehicle (a twin that
-    is not the 0.7x vehicle flown), and the selection's diagnostics say which."""
-    rows, _ = fly_sample(_vehicle({"twin": twin}), 0, out=tmp_path)
+    is not the 0.7x vehicle flown), and the selection's diagnostics say which; the study's
+    ``[selection]`` settings reach the selection (here a dead time at the acceleration input
+    and one lag, where the defaults have no dead time and two lags)."""
+    selection = {"input_delays": [0.12], "input_lags": [0.05]} if twin == "builtin" else None
+    rows, _ = fly_sample(_vehicle({"twin": twin}, selection=selection), 0, out=tmp_path)
     by = {r["controller"]: r for r in rows}
     assert by["mpc"]["error"] == "", by["mpc"]["error"]
     cc = json.loads((tmp_path / "model.json").read_text())["diagnostics"]["control_check"]
     if twin == "off":
         assert cc["twin"] is None
+        assert cc["input_delays"] == []
     else:
         assert f"{0.952:.3f} kg vehicle" in cc["twin"]["plant"], cc["twin"]["plant"]
+        assert cc["input_delays"] == [0.12] and cc["input_lags"] == [0.05], cc
+
+
+def test_an_unknown_selection_setting_is_refused_by_name(tmp_path):
+    p = tmp_path / "bad.toml"
+    p.write_text(
+        'name = "x"\nsamples = 2\n[base]\nselection = { input_delay = [0.1] }\n[vary]\n'
+        '"payload.mass" = { dist = "uniform", low = 0.1, high = 0.2 }\n',
+        encoding="utf-8",
+    )
+    with pytest.raises(ConfigError, match=r"selection\.input_delay: unknown field"):
+        load_spec(p)
 
 
 def test_an_unknown_twin_is_refused_by_name(tmp_path):

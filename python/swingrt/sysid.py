@@ -489,6 +489,7 @@ def select_for_control(
     look_ahead: int | None = None,
     input_lags: Sequence[float] | None = None,
     input_delays: Sequence[float] | None = None,
+    bound_amplitudes: Sequence[float] | None = None,
     flight_lag: bool | None = None,
     vehicle_drag: Sequence[float] | None = None,
     step: float | None = None,
@@ -511,7 +512,9 @@ def select_for_control(
     default) also behind the attitude lag the flight shows (``diagnostics['whitebox']
     ['attitude_lag']``: the acceleration command against the measured acceleration), and
     with no lag behind each dead time of ``input_delays`` [s] (the delay margin at the
-    acceleration input); one
+    acceleration input), and with no limit cycle predicted against the acceleration bound
+    for a command of each of ``bound_amplitudes`` times it (describing function; none by
+    default); one
     within ``bounds`` (fractions of
     the step: ``overshoot``, ``final_error``, ``hold_drift``) passes, else the least
     violating is taken. The
@@ -559,6 +562,7 @@ def select_for_control(
         "look_ahead": look_ahead,
         "input_lags": None if input_lags is None else list(input_lags),
         "input_delays": None if input_delays is None else list(input_delays),
+        "bound_amplitudes": None if bound_amplitudes is None else list(bound_amplitudes),
         "flight_lag": flight_lag,
         "vehicle_drag": None if vehicle_drag is None else list(vehicle_drag),
         "step": step,

@@ -1313,7 +1313,12 @@ fn a_dead_time_is_checked_as_a_queue_of_commands_flies() {
     use std::collections::VecDeque;
     use swing_core::design::check::{
         actuated_noise_loop, actuated_stable, closed_loop_radius, lagged_noise_loop,
-        step_check_with, StepCheckSettings,
+        step_check_with, Actuator, StepCheckSettings,
+    };
+    let delayed_by = |delay: usize, lag: f64| Actuator {
+        lag,
+        delay,
+        gain: 1.0,
     };
     let m = model(0.2, 1.0, 8);
     // Bounds that never act: the constrained MPC is its linear law.
@@ -1348,7 +1353,7 @@ fn a_dead_time_is_checked_as_a_queue_of_commands_flies() {
         ((state[0].v - 1.0).abs(), at_10)
     };
     let first_unstable = (0..60)
-        .find(|&d| !actuated_stable(&mpc, &m, &m, 0.0, d).unwrap())
+        .find(|&d| !actuated_stable(&mpc, &m, &m, delayed_by(d, 0.0)).unwrap())
         .expect("enough dead time destabilises any loop");
     assert!(first_unstable >= 2, "{first_unstable}");
     let (settled, _) = fly(first_unstable - 1, 4000);
@@ -1362,10 +1367,12 @@ fn a_dead_time_is_checked_as_a_queue_of_commands_flies() {
     // No delay is the lag's loop; a delay adds one state per tick and input.
     let plain = lagged_noise_loop(&mpc, &m, &m, 0.7).unwrap();
     assert_eq!(
-        actuated_noise_loop(&mpc, &m, &m, 0.7, 0).unwrap().a,
+        actuated_noise_loop(&mpc, &m, &m, delayed_by(0, 0.7))
+            .unwrap()
+            .a,
         plain.a
     );
-    let delayed = actuated_noise_loop(&mpc, &m, &m, 0.7, 3).unwrap();
+    let delayed = actuated_noise_loop(&mpc, &m, &m, delayed_by(3, 0.7)).unwrap();
     assert_eq!(delayed.a.nrows(), plain.a.nrows() + 3);
     assert!(closed_loop_radius(&mpc, &m, &m, 0.0).unwrap() < 1.0);
     // The step check flies the same queue: its final error is the local loop's, to the bit.
@@ -1388,4 +1395,86 @@ fn a_dead_time_is_checked_as_a_queue_of_commands_flies() {
         .unwrap()
         .final_error
         .is_infinite());
+}
+
+/// The describing function of the acceleration bound, in closed form: 1 within the bound,
+/// (2/π)(π/6 + √3/4) at twice it, → 4/(π a) far beyond it, falling in between.
+#[test]
+fn the_bound_s_describing_function_is_the_saturation_s() {
+    use swing_core::design::check::saturation_gain;
+    assert_eq!(saturation_gain(0.5), 1.0);
+    assert_eq!(saturation_gain(1.0), 1.0);
+    let at_2 = std::f64::consts::FRAC_2_PI * (std::f64::consts::PI / 6.0 + 3f64.sqrt() / 4.0);
+    assert!((saturation_gain(2.0) - at_2).abs() < 1e-12);
+    let far = saturation_gain(1e4) * 1e4;
+    assert!((far - 4.0 / std::f64::consts::PI).abs() < 1e-6, "{far}");
+    let grid: Vec<f64> = (0..200).map(|k| 1.0 + 0.25 * k as f64).collect();
+    assert!(grid
+        .windows(2)
+        .all(|w| saturation_gain(w[1]) < saturation_gain(w[0])));
+}
+
+/// A loop that needs more than the bound gives limit-cycles against it: on a plant whose
+/// velocity runs away by itself (negative drag), the MPC's loop is stable at gain 1 but not
+/// at the describing function of a command fifty times the bound, where it is nearly the
+/// open plant; the worst-case check then calls the loop never settled, and without the
+/// amplitude, or on the plant that does not run away, it settles.
+#[test]
+fn a_loop_that_needs_more_than_the_bound_is_predicted_to_limit_cycle() {
+    use swing_core::design::check::{
+        actuated_noise_loop, actuated_stable, saturation_gain, worst_step_check, Actuator,
+        Uncertainty,
+    };
+    let m = model(0.2, 1.0, 8);
+    let mpc = MpcController::new(&m, MpcSettings::default()).unwrap();
+    let mut runaway = m.clone();
+    let v = runaway.states.iter().position(|s| s == "vn").unwrap();
+    runaway.a[(v, v)] += 0.5 * runaway.dt;
+    let at = |plant: &LinearModel, amplitude: f64| {
+        let actuator = Actuator {
+            lag: 0.0,
+            delay: 0,
+            gain: saturation_gain(amplitude),
+        };
+        actuated_stable(&mpc, &m, plant, actuator).unwrap()
+    };
+    assert!(at(&runaway, 1.0));
+    assert!(!at(&runaway, 50.0));
+    assert!(at(&m, 50.0));
+    // The gain scales the law: the loop at gain g commands g times what it does at 1.
+    let full = actuated_noise_loop(&mpc, &m, &m, Actuator::lagged(0.0)).unwrap();
+    let half = Actuator {
+        gain: 0.5,
+        ..Actuator::lagged(0.0)
+    };
+    let scaled = actuated_noise_loop(&mpc, &m, &m, half).unwrap();
+    assert!((&scaled.c_u - &full.c_u * 0.5).amax() < 1e-12);
+    assert!((&scaled.d_u - &full.d_u * 0.5).amax() < 1e-12);
+    let bad = Actuator {
+        gain: 0.0,
+        ..Actuator::lagged(0.0)
+    };
+    assert!(actuated_noise_loop(&mpc, &m, &m, bad).is_err());
+    let check = |plants: &[LinearModel], amplitudes: &[f64]| {
+        let set = Uncertainty {
+            plants,
+            input_lags: &[0.0],
+            input_delays: &[],
+            bound_amplitudes: amplitudes,
+        };
+        worst_step_check(&mpc, &m, &set, 1.0)
+    };
+    assert!(check(std::slice::from_ref(&runaway), &[50.0])
+        .unwrap()
+        .final_error
+        .is_infinite());
+    assert!(check(std::slice::from_ref(&runaway), &[])
+        .unwrap()
+        .final_error
+        .is_finite());
+    assert!(check(std::slice::from_ref(&m), &[2.0, 50.0])
+        .unwrap()
+        .final_error
+        .is_finite());
+    assert!(check(std::slice::from_ref(&m), &[0.5]).is_err());
 }

@@ -34,7 +34,7 @@ pub(crate) fn twin_prior(
                 vehicle_mass,
                 adaptive.twin.search,
             )
-            .map_err(|e| to_py(ConfigError::new("twin", e)))?;
+            .map_err(|e| to_py(e.within("twin")))?;
             Ok(Some(TwinPrior {
                 twin,
                 payload_mass,

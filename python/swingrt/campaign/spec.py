@@ -9,7 +9,8 @@ Top-level keys:
 - ``batch_size``: samples per Dask task (default: chosen from the study size);
 - ``[base]``: an experiment's keys (see :mod:`swingrt.experiments`): ``step``,
   ``duration``, ``axes``, ``training_duration``, ``[common]``, ``[training]``,
-  ``[evaluation]``, ``[identify]``, ``[mpc]``, ``[lqr]``, the methods' sections
+  ``[evaluation]``, ``[identify]``, ``[selection]``, ``[mpc]``, ``[lqr]``, the methods'
+  sections
   (``[shaper]``, ``[payload_p]``, ``[deepc]``, ``[nmpc]``, ``[sindy]``), ``tick_budget`` (no
   ``name``, ``controllers``,
   ``grid``: the campaign owns those);
@@ -24,7 +25,8 @@ Top-level keys:
 
 A dotted ``[vary]`` key addresses:
 
-- ``identify.X``, ``mpc.X``, ``lqr.X``, ``mission.X``: those settings sections;
+- ``identify.X``, ``selection.X``, ``mpc.X``, ``lqr.X``, ``mission.X``: those settings
+  sections;
 - ``training.X`` / ``evaluation.X``: a scenario field of that flight only;
 - ``duration``, ``training_duration``, ``step.X``: the experiment's own keys;
 - anything else (``payload.mass``, ``wind.velocity``, ``noise.swing_std``, …): a scenario
@@ -64,6 +66,7 @@ _BASE_KEYS = {
     "training",
     "evaluation",
     "identify",
+    "selection",
     "mpc",
     "lqr",
     "tick_budget",
@@ -72,6 +75,7 @@ _BASE_KEYS = {
 }
 _SECTIONS = (
     "identify",
+    "selection",
     "mpc",
     "lqr",
     "training",

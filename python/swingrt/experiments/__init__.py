@@ -3,7 +3,8 @@
 Each ``defs/*.toml`` defines: the controlled ``axes``; the ``controllers`` compared
 (``pid``, ``lqr``, ``mpc``, ``mpc_adaptive``, ``mpc_oracle``); the velocity ``step``; the run
 ``duration``; scenario overrides ``[common]`` (training and evaluation), ``[training]`` and
-``[evaluation]``; settings ``[identify]``, ``[mpc]``, ``[lqr]`` and ``[adaptive]``; and
+``[evaluation]``; settings ``[identify]``, ``[selection]`` (the control-relevant
+selection's), ``[mpc]``, ``[lqr]`` and ``[adaptive]``; and
 either an optional ``[grid]`` of dotted scenario keys whose product makes the cases, or
 named ``[cases.<name>]`` tables with their own ``common``, ``evaluation`` and ``step`` and,
 for ``mpc_oracle``, ``oracle`` (the overrides of a second training flight, the configuration

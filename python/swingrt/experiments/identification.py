@@ -24,7 +24,7 @@ def identify_case(
     search's error-vs-q plot (the Pareto elbow) is written there. ``vehicle`` (the training
     flight's scenario) describes the vehicle: its mass is the white-box's ``vehicle_mass``
     unless ``[identify]`` gives one, and the control-relevant selection flies the twin that
-    ``[identify] twin`` names (:func:`case_twin`).
+    ``[identify] twin`` names (:func:`case_twin`), with ``[selection]``'s settings.
 
     The data-driven model never waits on the white-box: when the white-box cannot be
     estimated (a payload mass that comes out non-positive, no swing peak), the white-box
@@ -46,6 +46,7 @@ def identify_case(
                 axes=exp.axes,
                 mpc_settings=exp.mpc or None,
                 twin=case_twin(exp, vehicle),
+                **exp.selection,
             )
         model = result.model
         if plots is not None:

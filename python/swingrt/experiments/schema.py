@@ -40,6 +40,7 @@ _KNOWN_KEYS = {
     "evaluation",
     "grid",
     "identify",
+    "selection",
     "mpc",
     "lqr",
     "training_duration",
@@ -73,6 +74,9 @@ class Experiment:
     evaluation: dict[str, Any] = field(default_factory=dict)
     grid: dict[str, list[Any]] = field(default_factory=dict)
     identify: dict[str, Any] = field(default_factory=dict)
+    #: The control-relevant selection's settings (``swing_core::design::SelectionSettings``:
+    #: ``input_lags``, ``input_delays`` …), passed to :func:`swingrt.sysid.select_for_control`.
+    selection: dict[str, Any] = field(default_factory=dict)
     mpc: dict[str, Any] = field(default_factory=dict)
     lqr: dict[str, Any] = field(default_factory=dict)
     adaptive: dict[str, Any] = field(default_factory=dict)
@@ -145,6 +149,12 @@ class Experiment:
                     f"identify.twin: one of {', '.join(TWINS)}, not {twin!r}", field="identify.twin"
                 )
             _core.check_settings("identify", ident)
+            if "plant_label" in self.selection:
+                raise ConfigError(
+                    "selection.plant_label: set by the selection, not by a study",
+                    field="selection.plant_label",
+                )
+            _core.check_settings("selection", self.selection)
             _core.check_settings("mpc", self.mpc)
             _core.check_settings("lqr", self.lqr)
             _core.check_settings("adaptive", self.adaptive)

@@ -219,26 +219,73 @@ pub fn mpc_step_check(
     step_check_with(&mut mpc, controller, plant, check)
 }
 
+/// The uncertainty a model's MPC must be robust to: the plants it may fly and what may stand
+/// between its command and them. Every plant is flown behind each lag (no dead time) and
+/// behind each dead time (no lag); and, for a limit cycle against the acceleration bound,
+/// the unconstrained loop of every plant behind each lag must also be stable at the bound's
+/// describing function of each amplitude ([`saturation_gain`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Uncertainty<'a> {
+    /// Linear plants (the white-box of the flight, with and without drag …).
+    pub plants: &'a [LinearModel],
+    /// Time constants of a first-order lag at the acceleration input [s] (0: none).
+    pub input_lags: &'a [f64],
+    /// Dead times at the acceleration input [s]: the delay margin.
+    pub input_delays: &'a [f64],
+    /// Amplitudes of the unconstrained command, as multiples of the acceleration bound
+    /// (each > 1), at which no limit cycle may be predicted.
+    pub bound_amplitudes: &'a [f64],
+}
+
 /// Worst figures of `mpc` (designed on `controller`, not flown; each loop flies a fresh
-/// copy), flying a `step` [m/s] on each of `plants` behind each of `input_lags` [s] and,
-/// with no lag, behind each of the pure `input_delays` [s]: the one worst-case loop of the
-/// offline selection and the adaptive swap. The loops are independent and flown side by
-/// side ([`crate::design::parallel`]).
+/// copy) flying a `step` [m/s] over the `set` ([`Uncertainty`]): the one worst-case loop of
+/// the offline selection and the adaptive swap. The loops are independent and flown side by
+/// side ([`crate::design::parallel`]). A loop predicted to limit-cycle against the bound
+/// has never settled: its final error and overshoot are ∞, as a diverging loop's.
 pub fn worst_step_check(
     mpc: &MpcController,
     controller: &LinearModel,
-    plants: &[LinearModel],
-    input_lags: &[f64],
-    input_delays: &[f64],
+    set: &Uncertainty<'_>,
     step: f64,
 ) -> Result<StepCheck, ControlError> {
-    let actuators: Vec<(f64, f64)> = input_lags
+    let actuators: Vec<(f64, f64)> = set
+        .input_lags
         .iter()
         .map(|&l| (l, 0.0))
-        .chain(input_delays.iter().map(|&d| (0.0, d)))
+        .chain(set.input_delays.iter().map(|&d| (0.0, d)))
         .collect();
-    let mut loops = Vec::with_capacity(plants.len() * actuators.len());
-    for plant in plants {
+    let mut worst = StepCheck {
+        overshoot: f64::NEG_INFINITY,
+        final_error: f64::NEG_INFINITY,
+        hold_drift: f64::NEG_INFINITY,
+    };
+    check_bound_amplitudes(set.bound_amplitudes)?;
+    let mut cycles = Vec::new();
+    for plant in set.plants {
+        for &tau in set.input_lags {
+            for &amplitude in set.bound_amplitudes {
+                cycles.push((plant, tau, amplitude));
+            }
+        }
+    }
+    let limit_cycle = crate::design::parallel::map(cycles, |(plant, tau, amplitude)| {
+        let actuator = Actuator {
+            lag: lag_factor(tau, plant.dt)?,
+            delay: 0,
+            gain: saturation_gain(amplitude),
+        };
+        actuated_stable(mpc, controller, plant, actuator).map(|stable| !stable)
+    });
+    for cycles in limit_cycle {
+        if cycles? {
+            worst.overshoot = f64::INFINITY;
+            worst.final_error = f64::INFINITY;
+            worst.hold_drift = 0.0;
+            return Ok(worst);
+        }
+    }
+    let mut loops = Vec::with_capacity(set.plants.len() * actuators.len());
+    for plant in set.plants {
         for &actuator in &actuators {
             loops.push((plant, actuator, mpc.fresh_copy()?));
         }
@@ -253,11 +300,6 @@ pub fn worst_step_check(
             };
             step_check_with(&mut mpc, controller, plant, &check)
         });
-    let mut worst = StepCheck {
-        overshoot: f64::NEG_INFINITY,
-        final_error: f64::NEG_INFINITY,
-        hold_drift: f64::NEG_INFINITY,
-    };
     for r in checks {
         let r = r?;
         worst.overshoot = worst.overshoot.max(r.overshoot);
@@ -265,6 +307,27 @@ pub fn worst_step_check(
         worst.hold_drift = worst.hold_drift.max(r.hold_drift);
     }
     Ok(worst)
+}
+
+/// Check amplitudes of the describing-function test: each a finite multiple of the bound
+/// above 1 (within the bound the loop is linear, and checked as such).
+pub fn check_bound_amplitudes(amplitudes: &[f64]) -> Result<(), ConfigError> {
+    for (i, a) in amplitudes.iter().enumerate() {
+        if !(*a > 1.0 && a.is_finite()) {
+            return Err(ConfigError::new(
+                format!("bound_amplitudes[{i}]"),
+                format!("{a} is not a finite multiple of the bound above 1"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The factor λ = exp(−dt/τ) of a first-order lag of time constant `tau` [s] at a sample
+/// time `dt` (0 for no lag).
+pub fn lag_factor(tau: f64, dt: f64) -> Result<f64, ConfigError> {
+    non_negative("input_lag", tau)?;
+    Ok(if tau > 0.0 { (-dt / tau).exp() } else { 0.0 })
 }
 
 /// [`mpc_step_check`] with a controller already built on `controller` (reset at the start):
@@ -293,16 +356,17 @@ pub fn step_check_with(
     }
     let ticks = ticks_f as usize;
     let step_tick = (check.t_step / dt).round() as usize;
-    let lag = if check.input_lag > 0.0 {
-        (-dt / check.input_lag).exp()
-    } else {
-        0.0
-    };
+    let lag = lag_factor(check.input_lag, dt)?;
     let delay = delay_ticks(check.input_delay, dt)?;
     let step = check.step.abs();
     // An unconstrained loop with an eigenvalue outside the unit circle grows into a limit
     // cycle against the acceleration bound in flight, however slowly it shows in 20 s.
-    if !actuated_stable(mpc, controller, plant, lag, delay)? {
+    let actuator = Actuator {
+        lag,
+        delay,
+        gain: 1.0,
+    };
+    if !actuated_stable(mpc, controller, plant, actuator)? {
         return Ok(StepCheck {
             overshoot: f64::INFINITY,
             final_error: f64::INFINITY,
@@ -424,19 +488,59 @@ pub fn lagged_noise_loop(
     plant: &LinearModel,
     lag: f64,
 ) -> Result<NoiseLoop, ControlError> {
-    actuated_noise_loop(mpc, controller, plant, lag, 0)
+    actuated_noise_loop(mpc, controller, plant, Actuator::lagged(lag))
 }
 
-/// [`lagged_noise_loop`] with the command also delayed by `delay` whole ticks before the
-/// lag: the commands in flight w₁ … w_d (w₁⁺ = u, wᵢ⁺ = wᵢ₋₁) follow the lag's state in X,
-/// and w_d drives the lag (u itself when `delay` = 0).
+/// What stands between the MPC's law and the plant in a linear check loop.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Actuator {
+    /// First-order lag factor λ = exp(−dt/τ) of the attitude loop (0: none).
+    pub lag: f64,
+    /// Whole ticks the command waits before the lag (0: none).
+    pub delay: usize,
+    /// Share of the law's command that is applied, and that the controller remembers as
+    /// applied: the acceleration bound's describing function ([`saturation_gain`]; 1:
+    /// within the bound).
+    pub gain: f64,
+}
+
+impl Actuator {
+    /// A first-order lag of factor `lag` alone.
+    pub fn lagged(lag: f64) -> Self {
+        Self {
+            lag,
+            delay: 0,
+            gain: 1.0,
+        }
+    }
+}
+
+/// Describing function of a saturation for a sinusoid of `amplitude` times its bound: the
+/// gain of the first harmonic that passes, (2/π)(asin r + r √(1 − r²)) with r = 1/amplitude
+/// (1 within the bound, → 4/(π·amplitude) far beyond it). A loop that is stable at gain 1 but
+/// unstable at one of these is predicted to limit-cycle against the bound at that amplitude.
+pub fn saturation_gain(amplitude: f64) -> f64 {
+    if amplitude.is_nan() || amplitude <= 1.0 {
+        return 1.0;
+    }
+    let r = 1.0 / amplitude;
+    std::f64::consts::FRAC_2_PI * (r.asin() + r * (1.0 - r * r).sqrt())
+}
+
+/// [`lagged_noise_loop`] behind an [`Actuator`]: the command also delayed by
+/// `actuator.delay` whole ticks before the lag (the commands in flight w₁ … w_d, w₁⁺ = u,
+/// wᵢ⁺ = wᵢ₋₁, follow the lag's state in X, and w_d drives the lag; u itself with no delay),
+/// and scaled by `actuator.gain` as it leaves the law (u = gain · law, remembered so).
 pub fn actuated_noise_loop(
     mpc: &MpcController,
     controller: &LinearModel,
     plant: &LinearModel,
-    lag: f64,
-    delay: usize,
+    actuator: Actuator,
 ) -> Result<NoiseLoop, ControlError> {
+    let Actuator { lag, delay, gain } = actuator;
+    if !(gain > 0.0 && gain <= 1.0) {
+        return Err(ConfigError::new("gain", format!("{gain} not in (0, 1]")).into());
+    }
     check_plant(controller, plant)?;
     if !(0.0..1.0).contains(&lag) {
         return Err(
@@ -556,8 +660,8 @@ pub fn actuated_noise_loop(
     g.columns_mut(iy, nm).copy_from(&(&py * &sh));
     g.columns_mut(ip, nx).copy_from(&pp);
     let ge = &py * &e;
-    let k1 = cond.k_xi.rows(0, m).into_owned();
-    let ku1 = cond.k_u.rows(0, m).into_owned();
+    let k1 = cond.k_xi.rows(0, m).into_owned() * gain;
+    let ku1 = cond.k_u.rows(0, m).into_owned() * gain;
     let mut c_u = &k1 * &g;
     c_u.columns_mut(iu, m).add_assign(&ku1);
     let d_u = &k1 * &ge;
@@ -614,19 +718,17 @@ pub fn closed_loop_stable(
     plant: &LinearModel,
     lag: f64,
 ) -> Result<bool, ControlError> {
-    actuated_stable(mpc, controller, plant, lag, 0)
+    actuated_stable(mpc, controller, plant, Actuator::lagged(lag))
 }
 
-/// [`closed_loop_stable`] with the command also delayed by `delay` ticks
-/// ([`actuated_noise_loop`]).
+/// [`closed_loop_stable`] behind an [`Actuator`] ([`actuated_noise_loop`]).
 pub fn actuated_stable(
     mpc: &MpcController,
     controller: &LinearModel,
     plant: &LinearModel,
-    lag: f64,
-    delay: usize,
+    actuator: Actuator,
 ) -> Result<bool, ControlError> {
-    let nl = actuated_noise_loop(mpc, controller, plant, lag, delay)?;
+    let nl = actuated_noise_loop(mpc, controller, plant, actuator)?;
     crate::linalg::schur_stable(&nl.a)
         .ok_or_else(|| ControlError::Synthesis("closed-loop eigenvalues did not converge".into()))
 }
@@ -718,12 +820,7 @@ pub fn velocity_wander(
             ConfigError::new("span", format!("{span} s at dt = {dt} s is too long")).into(),
         );
     }
-    let lag = if input_lag > 0.0 {
-        (-dt / input_lag).exp()
-    } else {
-        0.0
-    };
-    let nl = lagged_noise_loop(mpc, controller, plant, lag)?;
+    let nl = lagged_noise_loop(mpc, controller, plant, lag_factor(input_lag, dt)?)?;
     let stable = crate::linalg::schur_stable(&nl.a).ok_or_else(|| {
         ControlError::Synthesis("closed-loop eigenvalues did not converge".into())
     })?;

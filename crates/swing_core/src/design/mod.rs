@@ -10,10 +10,12 @@
 //! - [`selection`]: the control-relevant choice among a search's candidates.
 //! - [`twin`]: the vehicle's twin as a check plant (a step flown on the simulator).
 //! - [`reidentify`]: a model re-identified on the twin for a payload measured in flight.
+//! - [`error`]: why a model was not designed or not adopted ([`DesignError`]).
 //! - [`adaptive`]: the adaptive MPC (online identification, checked re-synthesis, swap).
 
 pub mod adaptive;
 pub mod check;
+pub mod error;
 pub mod parallel;
 pub mod reidentify;
 pub mod selection;
@@ -24,3 +26,4 @@ pub(crate) mod fixtures;
 
 pub use adaptive::{AdaptiveMpc, AdaptiveSettings, SynthesisMode};
 pub use check::{mpc_step_check, step_check_with, StepCheck, StepCheckSettings};
+pub use error::DesignError;

@@ -14,9 +14,11 @@
 //! vehicle the twin's fidelity (PX4's gains, the attitude loop's lag) bounds what this
 //! gives, which is why the candidate still goes through the closed-loop check.
 
+use crate::config::{positive, ConfigError};
 use crate::control::MpcSettings;
 use crate::design::selection::{select_for_control, SelectionSettings};
 use crate::design::twin::TwinPlant;
+use crate::design::DesignError;
 use crate::plant::PayloadKind;
 use crate::sim::{Scenario, Simulator};
 use crate::sysid::dmdc::{self, DmdcSettings};
@@ -53,19 +55,18 @@ impl Twin {
         seconds: f64,
         vehicle_mass: f64,
         search: bool,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, ConfigError> {
         if !(seconds.is_finite() && seconds >= MIN_TWIN_SECONDS) {
-            return Err(format!(
-                "twin duration must be at least {MIN_TWIN_SECONDS} s, not {seconds}"
+            return Err(ConfigError::new(
+                "duration",
+                format!("twin duration must be at least {MIN_TWIN_SECONDS} s, not {seconds}"),
             ));
         }
-        if !(vehicle_mass.is_finite() && vehicle_mass > 0.0) {
-            return Err(format!("vehicle mass must be positive, not {vehicle_mass}"));
-        }
+        positive("vehicle_mass", vehicle_mass)?;
         let mut scenario = training.clone();
         scenario.duration = seconds;
         scenario.payload.events.clear();
-        scenario.validate().map_err(|e| e.to_string())?;
+        scenario.validate().map_err(|e| e.within("scenario"))?;
         Ok(Self {
             scenario,
             vehicle_mass,
@@ -87,25 +88,25 @@ impl Twin {
         mass: f64,
         length: f64,
         mpc: &MpcSettings,
-    ) -> Result<LinearModel, String> {
+    ) -> Result<LinearModel, DesignError> {
         if template.method != "dmdc" {
-            return Err(format!(
+            return Err(DesignError::Model(format!(
                 "the twin re-identifies DMDc models, not {}",
                 template.method
-            ));
+            )));
         }
         let mut sc = self.scenario.clone();
         sc.payload.kind = PayloadKind::Single;
         sc.payload.mass = mass;
         sc.payload.length = length;
-        sc.validate().map_err(|e| format!("twin payload: {e}"))?;
-        let trace = Simulator::run(sc).map_err(|e| format!("twin flight: {e}"))?;
-        let t = trace.column("t").ok_or("twin flight has no time column")?;
+        sc.validate().map_err(|e| e.within("payload"))?;
+        let trace = Simulator::run(sc)?;
         let column = |name: &str| {
             trace
                 .column(name)
-                .ok_or_else(|| format!("twin flight has no column {name}"))
+                .ok_or_else(|| DesignError::Model(format!("twin flight has no column {name}")))
         };
+        let t = column("t")?;
         let states = template
             .states
             .iter()
@@ -119,8 +120,7 @@ impl Twin {
         let dt = template.dt;
         let (x, n) = resample(t, &states, dt);
         let (u, m) = resample(t, &inputs, dt);
-        let traj =
-            Trajectory::new(&x, states.len(), &u, inputs.len()).map_err(|e| e.to_string())?;
+        let traj = Trajectory::new(&x, states.len(), &u, inputs.len())?;
         debug_assert_eq!(n, m);
         if !self.search {
             let full = template.n() * template.delays + template.m();
@@ -133,9 +133,8 @@ impl Twin {
                     offset: template.offset,
                     dt,
                 },
-            )
-            .map_err(|e| e.to_string())?;
-            return named(model, &template.states, &template.inputs).map_err(|e| e.to_string());
+            )?;
+            return Ok(named(model, &template.states, &template.inputs)?);
         }
         // As the oracle is identified (search, then the control-relevant selection against
         // the white-box of the flight), but at the template's q: the delay stack the
@@ -151,10 +150,9 @@ impl Twin {
             vehicle_mass: self.vehicle_mass,
             ..IdentifySettings::default()
         };
-        let (train, test) = split(&traj, &settings).map_err(|e| e.to_string())?;
-        let found = search(&train, &test, &settings).map_err(|e| e.to_string())?;
-        let plant = whitebox_model(&train, &template.states, &template.inputs, &settings, mass)
-            .map_err(|e| e.to_string())?;
+        let (train, test) = split(&traj, &settings)?;
+        let found = search(&train, &test, &settings)?;
+        let plant = whitebox_model(&train, &template.states, &template.inputs, &settings, mass)?;
         let selection_settings = SelectionSettings {
             plant_label: format!("twin whitebox (payload {mass:.3} kg on {length:.2} m)"),
             ..SelectionSettings::default()
@@ -167,8 +165,7 @@ impl Twin {
             &plant,
             selection_settings.step,
             template.m(),
-        )
-        .map_err(|e| e.to_string())?;
+        )?;
         let selection = select_for_control(
             &train,
             &test,
@@ -180,13 +177,11 @@ impl Twin {
             mpc,
             &selection_settings,
             Some(&vetting),
-        )
-        .map_err(|e| e.to_string())?;
+        )?;
         if !selection.passed {
-            return Err(format!(
-                "no rank at q = {} passed the closed-loop check on the twin's white-box",
-                template.delays
-            ));
+            return Err(DesignError::NonePassed {
+                delays: template.delays,
+            });
         }
         Ok(selection.model)
     }

@@ -246,6 +246,16 @@ pub struct SelectionSettings {
     ///
     /// Off (empty) by default until a campaign on a seed it was not chosen on measures it.
     pub input_delays: Vec<f64>,
+    /// Amplitudes of the unconstrained acceleration command, as multiples of the MPC's
+    /// bound, at which the loop of each plant behind each of `input_lags` must not be
+    /// predicted to limit-cycle against the bound: stable at the bound's describing
+    /// function of each (`check::saturation_gain`; 2, 5, 20 times the bound are gains
+    /// 0.61, 0.25, 0.064).
+    ///
+    /// Off (empty) by default: the loops of seed 6's six failing picks are stable at every
+    /// amplitude from 1.2 to 50 times the bound behind lags 0 and 0.1 s and every drag;
+    /// their cycles were a dead time's linear instability that the bound holds.
+    pub bound_amplitudes: Vec<f64>,
     /// Whether the linear plants are also flown behind the attitude lag the training flight
     /// shows (the white-box's `attitude_lag`, `sysid::lag`), when it tells one: the lag
     /// of the vehicle that flew, where `input_lags` are fixed guesses.
@@ -306,6 +316,7 @@ impl Default for SelectionSettings {
             look_ahead: 10,
             input_lags: vec![0.0, 0.1],
             input_delays: Vec::new(),
+            bound_amplitudes: Vec::new(),
             flight_lag: false,
             vehicle_drag: vec![0.12, 0.4],
             step: 2.0,
@@ -341,6 +352,7 @@ impl SelectionSettings {
         for (i, d) in self.input_delays.iter().enumerate() {
             non_negative(&format!("input_delays[{i}]"), *d)?;
         }
+        check::check_bound_amplitudes(&self.bound_amplitudes)?;
         for (i, k) in self.vehicle_drag.iter().enumerate() {
             non_negative(&format!("vehicle_drag[{i}]"), *k)?;
         }
@@ -789,14 +801,13 @@ pub fn select_for_control(
             .twin
             .is_none_or(|f| settings.twin_bounds.admit(&f, &settings.bounds));
         if on_twin {
-            figures.worst = worst_step_check(
-                &mpc,
-                model,
-                &plants,
-                &lags,
-                &settings.input_delays,
-                settings.step,
-            )?;
+            let set = check::Uncertainty {
+                plants: &plants,
+                input_lags: &lags,
+                input_delays: &settings.input_delays,
+                bound_amplitudes: &settings.bound_amplitudes,
+            };
+            figures.worst = worst_step_check(&mpc, model, &set, settings.step)?;
         }
         if let (Some(tw), Some(step)) = (twin, step) {
             if judge(&figures, pid, settings).settled() {
@@ -951,6 +962,7 @@ pub fn select_for_control(
             "plant": settings.plant_label,
             "input_lags": lags,
             "input_delays": settings.input_delays,
+            "bound_amplitudes": settings.bound_amplitudes,
             "vehicle_drag": settings.vehicle_drag,
             "step": settings.step,
             "bounds": settings.bounds,

@@ -12,6 +12,7 @@ use crate::control::layout::{AxisLayout, Measured};
 use crate::control::{
     AxisState, ControlError, ControllerEvent, MpcController, MpcSettings, SwingController, TickInfo,
 };
+use crate::design::DesignError;
 use crate::sysid::online::OnlineDmdc;
 use crate::sysid::payload::{PayloadTracker, TrackerSettings};
 use crate::sysid::{LinearModel, Offset};
@@ -223,7 +224,7 @@ impl AdaptiveMpc {
 
     /// Run the re-synthesis on the current factor now, on this thread (benchmarks, tests):
     /// the candidate model, or why it was refused.
-    pub fn synthesize_now(&self) -> Result<LinearModel, String> {
+    pub fn synthesize_now(&self) -> Result<LinearModel, DesignError> {
         let cols = self.online.columns();
         let job = Box::new(Job {
             factor: self.online.factor()[..cols * cols].to_vec(),
@@ -298,13 +299,7 @@ impl AdaptiveMpc {
             }
             Err(reason) => {
                 self.rejections += 1;
-                let bytes = reason.as_bytes();
-                let mut len = bytes.len().min(self.last_rejection.len());
-                while !reason.is_char_boundary(len) {
-                    len -= 1;
-                }
-                self.last_rejection[..len].copy_from_slice(&bytes[..len]);
-                self.last_rejection_len = len;
+                self.last_rejection_len = write_truncated(&mut self.last_rejection, &reason);
                 self.retry_after = self.online.accepted() + self.retry_samples;
                 if let (true, Some(tw)) = (from_twin, self.twin.as_mut()) {
                     tw.retry_at = self.tick + self.retry_samples;
@@ -533,4 +528,36 @@ fn fill_frame(sources: &[Measured], state: &[AxisState], x: &mut [f64]) -> bool 
         };
     }
     x.iter().all(|v| v.is_finite())
+}
+
+/// Write `what` into `buf` as far as it fits, cut at a character boundary, with no
+/// allocation (the tick thread records a rejection): the length written.
+fn write_truncated(buf: &mut [u8], what: &impl std::fmt::Display) -> usize {
+    use std::io::Write;
+    let mut cursor = std::io::Cursor::new(&mut buf[..]);
+    // A message longer than the buffer fills it; the error only says so.
+    let _ = write!(cursor, "{what}");
+    let len = cursor.position() as usize;
+    match std::str::from_utf8(&buf[..len]) {
+        Ok(_) => len,
+        Err(e) => e.valid_up_to(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::write_truncated;
+
+    #[test]
+    fn a_long_reason_is_cut_at_a_character_boundary() {
+        let mut buf = [0u8; 8];
+        let n = write_truncated(&mut buf, &"abc");
+        assert_eq!(&buf[..n], b"abc");
+        // "ééééé" is 10 bytes: 8 fit, the cut falls between characters.
+        let n = write_truncated(&mut buf, &"ééééé");
+        assert_eq!(std::str::from_utf8(&buf[..n]).unwrap(), "éééé");
+        // 'aé…': the second character would be split at byte 8.
+        let n = write_truncated(&mut buf, &"aaaaaaaé");
+        assert_eq!(std::str::from_utf8(&buf[..n]).unwrap(), "aaaaaaa");
+    }
 }

@@ -38,6 +38,11 @@ pub struct AdaptiveSettings {
     /// offline selection's delay margin (`SelectionSettings::input_delays`; off by default,
     /// as there).
     pub input_delays: Vec<f64>,
+    /// Amplitudes of the command, as multiples of the MPC's acceleration bound, at which the
+    /// check's loops must not be predicted to limit-cycle against it (the offline
+    /// selection's describing-function test, `SelectionSettings::bound_amplitudes`; off by
+    /// default, as there).
+    pub bound_amplitudes: Vec<f64>,
     /// Linear vehicle drag added to the candidate as a second check plant [1/s] (0 = only
     /// the candidate itself).
     pub check_drag: f64,
@@ -139,6 +144,7 @@ impl Default for AdaptiveSettings {
             check_step: 2.0,
             input_lags: vec![0.0, 0.1],
             input_delays: Vec::new(),
+            bound_amplitudes: Vec::new(),
             check_drag: 0.12,
             bounds: CheckBounds::default(),
             max_spectral_radius: 1.005,
@@ -174,6 +180,7 @@ impl AdaptiveSettings {
         for (i, d) in self.input_delays.iter().enumerate() {
             non_negative(&format!("input_delays[{i}]"), *d)?;
         }
+        crate::design::check::check_bound_amplitudes(&self.bound_amplitudes)?;
         non_negative("check_drag", self.check_drag)?;
         for (name, v) in [
             ("bounds.overshoot", self.bounds.overshoot),

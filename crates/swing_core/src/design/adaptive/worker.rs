@@ -8,8 +8,9 @@ use std::thread::JoinHandle;
 
 use super::settings::{AdaptiveSettings, SynthesisMode};
 use crate::control::{ControlError, MpcController, MpcSettings};
-use crate::design::check::{worst_step_check, StepCheck};
+use crate::design::check::{worst_step_check, StepCheck, Uncertainty};
 use crate::design::reidentify::Twin;
+use crate::design::DesignError;
 use crate::sysid::online::model_from_factor;
 use crate::sysid::{LinearModel, Offset};
 
@@ -30,7 +31,7 @@ pub(super) struct Candidate {
 /// What a synthesis returns; `job` comes back for reuse.
 pub(super) struct Outcome {
     pub(super) job: Box<Job>,
-    pub(super) result: Result<Candidate, String>,
+    pub(super) result: Result<Candidate, DesignError>,
     pub(super) check: Option<StepCheck>,
 }
 
@@ -47,7 +48,7 @@ pub(super) enum Retired {
         #[allow(dead_code)] Box<MpcController>,
         #[allow(dead_code)] Box<LinearModel>,
     ),
-    Reason(#[allow(dead_code)] String),
+    Reason(#[allow(dead_code)] DesignError),
 }
 
 /// What the synthesis needs besides the factor: fixed for the controller's life.
@@ -65,25 +66,27 @@ impl Synthesizer {
         Outcome { job, result, check }
     }
 
-    fn build(&self, job: &Job, check_out: &mut Option<StepCheck>) -> Result<Candidate, String> {
+    fn build(
+        &self,
+        job: &Job,
+        check_out: &mut Option<StepCheck>,
+    ) -> Result<Candidate, DesignError> {
         let t = &self.template;
         let full = t.m() + usize::from(t.offset == Offset::Affine) + t.n() * t.delays;
         // Rank 0 marks a full-rank model.
         let rank = if t.rank == 0 { full } else { t.rank.min(full) };
         let model = match (job.twin, &self.twin) {
             (Some([mass, length]), Some(twin)) => twin.identify(t, mass, length, &self.mpc)?,
-            (Some(_), None) => return Err("no twin to fly".into()),
-            (None, _) => {
-                model_from_factor(&job.factor, job.weight, rank, t).map_err(|e| e.to_string())?
-            }
+            (Some(_), None) => return Err(DesignError::NoTwin),
+            (None, _) => model_from_factor(&job.factor, job.weight, rank, t)?,
         };
-        let rho = model.spectral_radius().map_err(|e| e.to_string())?;
+        let rho = model.spectral_radius()?;
         // NaN is refused too.
         if rho.is_nan() || rho > self.settings.max_spectral_radius {
-            return Err(format!(
-                "spectral radius {rho:.4} above {}",
-                self.settings.max_spectral_radius
-            ));
+            return Err(DesignError::Unstable {
+                radius: rho,
+                bound: self.settings.max_spectral_radius,
+            });
         }
         if job.twin.is_some()
             && self
@@ -95,9 +98,7 @@ impl Synthesizer {
             // the measured payload, with drag and input lag: a stronger check than the
             // candidate on itself.
             return Ok(Candidate {
-                mpc: Box::new(
-                    MpcController::new(&model, self.mpc.clone()).map_err(|e| e.to_string())?,
-                ),
+                mpc: Box::new(MpcController::new(&model, self.mpc.clone())?),
                 model: Box::new(model),
             });
         }
@@ -110,32 +111,26 @@ impl Synthesizer {
         bare.c.fill(0.0);
         let mut plants = vec![bare.clone()];
         if self.settings.check_drag > 0.0 {
-            plants.push(
-                bare.with_velocity_drag(self.settings.check_drag)
-                    .map_err(|e| e.to_string())?,
-            );
+            plants.push(bare.with_velocity_drag(self.settings.check_drag)?);
         }
-        let checked = MpcController::new(&bare, self.mpc.clone()).map_err(|e| e.to_string())?;
-        let worst = worst_step_check(
-            &checked,
-            &bare,
-            &plants,
-            &self.settings.input_lags,
-            &self.settings.input_delays,
-            self.settings.check_step,
-        )
-        .map_err(|e| e.to_string())?;
+        let checked = MpcController::new(&bare, self.mpc.clone())?;
+        let set = Uncertainty {
+            plants: &plants,
+            input_lags: &self.settings.input_lags,
+            input_delays: &self.settings.input_delays,
+            bound_amplitudes: &self.settings.bound_amplitudes,
+        };
+        let worst = worst_step_check(&checked, &bare, &set, self.settings.check_step)?;
         *check_out = Some(worst);
         // The same requirements and refusals as the offline selection's linear plants.
         let refusals = self.settings.bounds.refusals(&worst);
         if !refusals.is_empty() {
-            let reasons: Vec<String> = refusals.iter().map(ToString::to_string).collect();
-            return Err(format!("closed-loop check failed: {}", reasons.join("; ")));
+            return Err(DesignError::Refused(refusals));
         }
         let mpc = if model.c.iter().all(|v| *v == 0.0) {
             checked
         } else {
-            MpcController::new(&model, self.mpc.clone()).map_err(|e| e.to_string())?
+            MpcController::new(&model, self.mpc.clone())?
         };
         Ok(Candidate {
             mpc: Box::new(mpc),
