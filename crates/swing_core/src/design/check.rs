@@ -323,11 +323,11 @@ pub fn check_bound_amplitudes(amplitudes: &[f64]) -> Result<(), ConfigError> {
     Ok(())
 }
 
-/// The factor λ = exp(−dt/τ) of a first-order lag of time constant `tau` [s] at a sample
-/// time `dt` (0 for no lag).
-pub fn lag_factor(tau: f64, dt: f64) -> Result<f64, ConfigError> {
+/// The check's lag factor for an input lag of `tau` [s] ([`crate::linalg::lag_factor`]),
+/// a negative one refused.
+fn lag_factor(tau: f64, dt: f64) -> Result<f64, ConfigError> {
     non_negative("input_lag", tau)?;
-    Ok(if tau > 0.0 { (-dt / tau).exp() } else { 0.0 })
+    Ok(crate::linalg::lag_factor(tau, dt))
 }
 
 /// [`mpc_step_check`] with a controller already built on `controller` (reset at the start):

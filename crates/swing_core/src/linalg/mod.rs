@@ -185,6 +185,16 @@ pub fn window_mean_std(a: &DMatrix<f64>, p: &DMatrix<f64>, c: &DMatrix<f64>, win
     (sum.max(0.0) / (n * n)).sqrt()
 }
 
+/// Pole of a first-order lag of time constant `tau` [s] sampled at `dt` [s] under a
+/// zero-order hold, λ = exp(−dt/τ): x⁺ = λx + (1 − λ)u. 0 (no lag) for `tau` ≤ 0.
+pub fn lag_factor(tau: f64, dt: f64) -> f64 {
+    if tau > 0.0 {
+        (-dt / tau).exp()
+    } else {
+        0.0
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

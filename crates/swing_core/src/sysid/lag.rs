@@ -84,7 +84,7 @@ fn axis_residual(
 ) -> Option<(f64, f64)> {
     // Exact for a first-order lag under a zero-order-hold command: the lag's state f moves
     // as f⁺ = αf + (1 − α)u, and its mean over the sample is u + (f − u)·τ(1 − α)/dt.
-    let alpha = if tau > 0.0 { (-dt / tau).exp() } else { 0.0 };
+    let alpha = crate::linalg::lag_factor(tau, dt);
     let share = if tau > 0.0 {
         tau * (1.0 - alpha) / dt
     } else {
