@@ -913,3 +913,29 @@ def test_the_white_box_carries_the_lag_of_the_flight_and_the_check_flies_behind_
     assert flown.model.diagnostics["control_check"]["input_lags"] == [0.0, 0.1, lag]
     fixed = sysid.select_for_control(train, result, twin=None)
     assert fixed.model.diagnostics["control_check"]["input_lags"] == [0.0, 0.1]
+
+
+@pytest.mark.parametrize("mass", [0.952 * 0.7, 0.952, 0.952 * 1.5])
+def test_the_builtin_twin_weighs_the_vehicle_and_hovers_as_the_builtin_does(mass):
+    """The built-in twin at a known vehicle mass: that mass, its motors and inertia scaled
+    with it (the same hover thrust with the same payload's share of the weight), the rest
+    the built-in vehicle's."""
+    base = _core.Scenario.builtin("step")
+    twin = sysid.builtin_twin(mass)
+    b, t = base.to_dict()["vehicle"], twin.to_dict()["vehicle"]
+    k = mass / b["mass"]
+    assert t["mass"] == pytest.approx(mass)
+    assert t["thrust_poly"] == pytest.approx([c * k for c in b["thrust_poly"]])
+    assert t["inertia"] == pytest.approx([i * k for i in b["inertia"]])
+    assert t["drag"] == b["drag"] and t["motor_tau"] == b["motor_tau"]
+    assert twin.to_dict()["controller"] == base.to_dict()["controller"]
+    # The payload scaled with the vehicle: the same normalised hover thrust.
+    p = twin.to_dict()["payload"]["mass"] * k
+    scaled = twin.with_overrides({"payload": {"mass": p}})
+    assert scaled.hover_thrust() == pytest.approx(base.hover_thrust(), rel=1e-9)
+
+
+@pytest.mark.parametrize("mass", [0.0, -1.0, math.nan, math.inf])
+def test_a_twin_of_no_mass_is_refused_by_name(mass):
+    with pytest.raises(ConfigError, match="vehicle_mass"):
+        sysid.builtin_twin(mass)

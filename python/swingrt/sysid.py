@@ -56,6 +56,7 @@ __all__ = [
     "model_twin",
     "resample",
     "search",
+    "builtin_twin",
     "check_plant",
     "select_for_control",
     "sweep_noise",
@@ -522,8 +523,9 @@ def select_for_control(
     search's identification settings.
 
     With ``twin`` (a scenario of the vehicle: its airframe and PX4 gains, e.g. the training
-    flight's or one from ``swingrt vehicle``; by default ``"builtin"``, the built-in vehicle,
-    whose worth as a twin is PX4's cascade and its lag more than its exact airframe; ``None``
+    flight's or one from ``swingrt vehicle``; by default ``"builtin"``, the built-in vehicle
+    at the identification's vehicle mass (:func:`builtin_twin`), whose worth as a twin is
+    PX4's cascade and its lag more than its exact airframe; ``None``
     flies no twin), each candidate's MPC first flies the step on swingrt's nonlinear simulator of
     that vehicle carrying the white-box payload (both links when the swing shows a second
     one, ``diagnostics['whitebox']['links']``), with the flight's swing-sensor noise, in still
@@ -575,7 +577,7 @@ def select_for_control(
     if isinstance(twin, str):
         if twin != "builtin":
             raise ConfigError(f"twin: a Scenario, 'builtin' or None, not {twin!r}", field="twin")
-        twin = _core.Scenario.builtin("step")
+        twin = builtin_twin(s["vehicle_mass"])
     if plant.method != "whitebox":
         twin = None
     if twin is not None and swing_source(data) == "imu":
@@ -606,6 +608,35 @@ def select_for_control(
             }
         )
     return SearchResult(model=model, table=result.table, search=result.search, settings=s)
+
+
+def builtin_twin(vehicle_mass: float) -> _core.Scenario:
+    """The built-in vehicle as the twin of one that weighs ``vehicle_mass`` [kg] (the
+    identification's: given, described or the default): the mass ratio of vehicle and
+    payload sets how hard the swing pulls on the vehicle, so the twin weighs what is known.
+    What is not known stays the built-in Honeybee's: its motors are scaled with the mass (the
+    same hover thrust and thrust-to-weight, as :func:`swingrt.hil.params.vehicle_from_px4`
+    scales them to a given mass) and so is its inertia; drag, motor lag and PX4's gains
+    are nominal."""
+    twin = _core.Scenario.builtin("step")
+    vehicle = twin.to_dict()["vehicle"]
+    scale = float(vehicle_mass) / float(vehicle["mass"])
+    if scale == 1.0:
+        return twin
+    if not (math.isfinite(scale) and scale > 0.0):
+        raise ConfigError(
+            f"vehicle_mass must be a positive number of kg, not {vehicle_mass}",
+            field="vehicle_mass",
+        )
+    return twin.with_overrides(
+        {
+            "vehicle": {
+                "mass": float(vehicle_mass),
+                "thrust_poly": [c * scale for c in vehicle["thrust_poly"]],
+                "inertia": [i * scale for i in vehicle["inertia"]],
+            }
+        }
+    )
 
 
 def check_plant(

@@ -90,8 +90,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
         help="with --select control: also fly each candidate's MPC on swingrt's simulator of "
         "this vehicle (a scenario TOML: airframe and PX4 gains, e.g. from swingrt vehicle) "
         "carrying the white-box payload, and take only models that settle there; default "
-        "'builtin', the built-in vehicle (what a twin adds is PX4's cascade and its lag "
-        "more than the exact airframe); 'none' flies no twin",
+        "'builtin', the built-in vehicle at --vehicle-mass (what a twin adds is PX4's "
+        "cascade and its lag more than the exact airframe); 'none' flies no twin",
     )
     p.add_argument(
         "--sweep",
@@ -128,10 +128,14 @@ def run(args) -> int:
     if args.twin != "none":  # read before the search: a bad file fails at once
         from swingrt.scenario import resolve
 
-        twin = resolve(None if args.twin == "builtin" else args.twin, default="step")
-        if args.twin != "builtin" and settings["vehicle_mass"] is None:
-            # The vehicle's description weighs it for the white-box.
-            settings["vehicle_mass"] = float(twin.to_dict()["vehicle"]["mass"])
+        if args.twin == "builtin":
+            # Weighed at the identification's vehicle mass (sysid.builtin_twin).
+            twin = "builtin"
+        else:
+            twin = resolve(args.twin, default="step")
+            if settings["vehicle_mass"] is None:
+                # The vehicle's description weighs it for the white-box.
+                settings["vehicle_mass"] = float(twin.to_dict()["vehicle"]["mass"])
     with options_named():
         checked = sysid.identify_settings(**settings)
     ulog_swing = _ulog_swing(args)
