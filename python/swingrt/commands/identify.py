@@ -124,23 +124,21 @@ def run(args) -> int:
         vehicle_mass=args.vehicle_mass,
         cable_length=args.cable_length,
     )
-    twin = None
-    if args.twin != "none":  # read before the search: a bad file fails at once
+    # The vehicle's description, read before the search: a bad file fails at once.
+    described = None
+    if args.twin not in ("none", "builtin"):
         from swingrt.scenario import resolve
 
-        if args.twin == "builtin":
-            # Weighed at the identification's vehicle mass (sysid.builtin_twin).
-            twin = "builtin"
-        else:
-            twin = resolve(args.twin, default="step")
-            if settings["vehicle_mass"] is None:
-                # The vehicle's description weighs it for the white-box.
-                settings["vehicle_mass"] = float(twin.to_dict()["vehicle"]["mass"])
+        described = resolve(args.twin, default="step")
+        if settings["vehicle_mass"] is None:
+            # The vehicle's description weighs it for the white-box.
+            settings["vehicle_mass"] = float(described.to_dict()["vehicle"]["mass"])
+    # "builtin" is weighed at the identification's vehicle mass (sysid.builtin_twin).
+    twin = {"none": None, "builtin": "builtin"}.get(args.twin, described)
     with options_named():
         checked = sysid.identify_settings(**settings)
     ulog_swing = _ulog_swing(args)
     body = None
-    described = twin if args.twin not in ("none", "builtin") else None
     if described is not None and str(args.data).endswith(".ulg"):
         # The cable sensor on the airframe is part of the vehicle's description (read from
         # adc_report or from "SWBODY" rows).
