@@ -16,6 +16,7 @@ pub mod design;
 pub mod error;
 pub mod linalg;
 pub mod mission;
+pub mod parallel;
 pub mod plant;
 pub mod sensors;
 pub mod sim;

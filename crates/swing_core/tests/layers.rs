@@ -2,7 +2,7 @@
 //! same layer or a lower one (docs/architecture.md, "Layers"). Unit tests inside `src/`
 //! count too; a test that needs a higher layer belongs in `tests/`.
 //!
-//! Order, bottom first: config/error ← linalg ← plant (and the sensor models, `sensors`) ←
+//! Order, bottom first: config/error/parallel ← linalg ← plant (and the sensor models, `sensors`) ←
 //! sysid (and its fixtures in `testing`) ← control (and `mission`'s guidance) ← sim ← design.
 
 use std::path::{Path, PathBuf};
@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 /// Layer of a top-level module of `swing_core` (bottom = 0).
 fn layer(module: &str) -> Option<usize> {
     Some(match module {
-        "config" | "error" => 0,
+        "config" | "error" | "parallel" => 0,
         "linalg" => 1,
         "plant" | "sensors" => 2,
         "sysid" | "testing" => 3,

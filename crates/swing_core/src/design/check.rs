@@ -26,6 +26,7 @@ use nalgebra::DMatrix;
 use crate::control::{
     AxisState, ControlError, LinearPlant, Measured, MpcController, MpcSettings, SwingController,
 };
+use crate::linalg::Stationary;
 use crate::sysid::LinearModel;
 
 /// Most controller ticks one check may fly (a 20 s check at 30 ms is 667): a huge
@@ -240,7 +241,7 @@ pub struct Uncertainty<'a> {
 /// Worst figures of `mpc` (designed on `controller`, not flown; each loop flies a fresh
 /// copy) flying a `step` [m/s] over the `set` ([`Uncertainty`]): the one worst-case loop of
 /// the offline selection and the adaptive swap. The loops are independent and flown side by
-/// side ([`crate::design::parallel`]). A loop predicted to limit-cycle against the bound
+/// side ([`crate::parallel`]). A loop predicted to limit-cycle against the bound
 /// has never settled: its final error and overshoot are ∞, as a diverging loop's.
 pub fn worst_step_check(
     mpc: &MpcController,
@@ -268,7 +269,7 @@ pub fn worst_step_check(
             }
         }
     }
-    let limit_cycle = crate::design::parallel::map(cycles, |(plant, tau, amplitude)| {
+    let limit_cycle = crate::parallel::map(cycles, |(plant, tau, amplitude)| {
         let actuator = Actuator {
             lag: lag_factor(tau, plant.dt)?,
             delay: 0,
@@ -290,16 +291,15 @@ pub fn worst_step_check(
             loops.push((plant, actuator, mpc.fresh_copy()?));
         }
     }
-    let checks =
-        crate::design::parallel::map(loops, |(plant, (input_lag, input_delay), mut mpc)| {
-            let check = StepCheckSettings {
-                step,
-                input_lag,
-                input_delay,
-                ..StepCheckSettings::default()
-            };
-            step_check_with(&mut mpc, controller, plant, &check)
-        });
+    let checks = crate::parallel::map(loops, |(plant, (input_lag, input_delay), mut mpc)| {
+        let check = StepCheckSettings {
+            step,
+            input_lag,
+            input_delay,
+            ..StepCheckSettings::default()
+        };
+        step_check_with(&mut mpc, controller, plant, &check)
+    });
     for r in checks {
         let r = r?;
         worst.overshoot = worst.overshoot.max(r.overshoot);
@@ -703,9 +703,7 @@ pub fn closed_loop_radius(
     lag: f64,
 ) -> Result<f64, ControlError> {
     let nl = lagged_noise_loop(mpc, controller, plant, lag)?;
-    let ev = crate::linalg::eigenvalues(&nl.a).ok_or_else(|| {
-        ControlError::Synthesis("closed-loop eigenvalues did not converge".into())
-    })?;
+    let ev = crate::linalg::eigenvalues(&nl.a).ok_or_else(unconverged)?;
     Ok(ev.iter().map(|c| c.norm()).fold(0.0, f64::max))
 }
 
@@ -729,8 +727,7 @@ pub fn actuated_stable(
     actuator: Actuator,
 ) -> Result<bool, ControlError> {
     let nl = actuated_noise_loop(mpc, controller, plant, actuator)?;
-    crate::linalg::schur_stable(&nl.a)
-        .ok_or_else(|| ControlError::Synthesis("closed-loop eigenvalues did not converge".into()))
+    crate::linalg::schur_stable(&nl.a).ok_or_else(unconverged)
 }
 
 /// Closed-loop eigenvalues and the stationary RMS of u and Δu of `mpc` (designed on
@@ -743,9 +740,7 @@ pub fn noise_gain(
 ) -> Result<NoiseGain, ControlError> {
     let nl = noise_loop(mpc, controller, plant)?;
     let w = noise_levels(mpc, noise)?;
-    let ev = crate::linalg::eigenvalues(&nl.a).ok_or_else(|| {
-        ControlError::Synthesis("closed-loop eigenvalues did not converge".into())
-    })?;
+    let ev = crate::linalg::eigenvalues(&nl.a).ok_or_else(unconverged)?;
     let mut eigenvalues: Vec<(f64, f64)> = ev.iter().map(|c| (c.re, c.im)).collect();
     eigenvalues.sort_by(|x, y| x.0.hypot(x.1).total_cmp(&y.0.hypot(y.1)).reverse());
     let spectral_radius = eigenvalues.first().map_or(0.0, |x| x.0.hypot(x.1));
@@ -761,7 +756,19 @@ pub fn noise_gain(
     for (j, s) in w.iter().enumerate() {
         bw.column_mut(j).scale_mut(*s);
     }
-    let p = crate::linalg::stationary_covariance(&nl.a, &bw);
+    let p = match crate::linalg::stationary_covariance(&nl.a, &bw) {
+        Some(Stationary::Stable(p)) => p,
+        // Within rounding of the unit circle the doubling's certificate can disagree.
+        Some(Stationary::Unstable) => {
+            return Ok(NoiseGain {
+                eigenvalues,
+                spectral_radius,
+                rms_u: f64::INFINITY,
+                rms_du: f64::INFINITY,
+            })
+        }
+        None => return Err(unconverged()),
+    };
     let rms = |c: &DMatrix<f64>, d: &DMatrix<f64>| {
         let mut dw = d.clone();
         for (j, s) in w.iter().enumerate() {
@@ -775,6 +782,11 @@ pub fn noise_gain(
         rms_u: rms(&nl.c_u, &nl.d_u),
         rms_du: rms(&nl.c_du, &nl.d_du),
     })
+}
+
+/// The error of a closed loop whose eigenvalues (or covariance) did not converge.
+fn unconverged() -> ControlError {
+    ControlError::Synthesis("closed-loop eigenvalues did not converge".into())
 }
 
 /// The noise level of each model state of `mpc`'s newest frame, checked non-negative.
@@ -821,17 +833,15 @@ pub fn velocity_wander(
         );
     }
     let nl = lagged_noise_loop(mpc, controller, plant, lag_factor(input_lag, dt)?)?;
-    let stable = crate::linalg::schur_stable(&nl.a).ok_or_else(|| {
-        ControlError::Synthesis("closed-loop eigenvalues did not converge".into())
-    })?;
-    if !stable {
-        return Ok(f64::INFINITY);
-    }
     let mut bw = nl.b.clone();
     for (j, s) in w.iter().enumerate() {
         bw.column_mut(j).scale_mut(*s);
     }
-    let p = crate::linalg::stationary_covariance(&nl.a, &bw);
+    let p = match crate::linalg::stationary_covariance(&nl.a, &bw) {
+        Some(Stationary::Stable(p)) => p,
+        Some(Stationary::Unstable) => return Ok(f64::INFINITY),
+        None => return Err(unconverged()),
+    };
     // The plant's states come first in the loop's state.
     let layout = crate::control::AxisLayout::from_model(plant)?;
     let mut worst = 0.0_f64;

@@ -6,7 +6,6 @@
 //!
 //! - [`check`]: the closed-loop step check of an MPC on a linear plant and the analysis of
 //!   its unconstrained loop (spectral radius, noise gains).
-//! - [`parallel`]: independent checks side by side, results in order.
 //! - [`selection`]: the control-relevant choice among a search's candidates.
 //! - [`twin`]: the vehicle's twin as a check plant (a step flown on the simulator).
 //! - [`reidentify`]: a model re-identified on the twin for a payload measured in flight.
@@ -16,7 +15,6 @@
 pub mod adaptive;
 pub mod check;
 pub mod error;
-pub mod parallel;
 pub mod reidentify;
 pub mod selection;
 pub mod twin;

@@ -859,22 +859,34 @@ pub fn select_for_control(
             swing_rate: 0.0,
         };
         let base = mpc.settings().swing_measurement_noise();
+        // Each factor's design and wander, in order until one is within the target; later
+        // factors may be designed ahead on an idle core.
+        let tried = crate::parallel::until(
+            &settings.noise_factors,
+            |&factor| -> Result<(f64, MpcController), ControlError> {
+                let designed = if factor > 1.0 {
+                    mpc.with_swing_measurement_noise(base * factor)?
+                } else {
+                    mpc.fresh_copy()?
+                };
+                let w = check::velocity_wander(
+                    &designed,
+                    &model,
+                    plant,
+                    design_lag,
+                    noise,
+                    WANDER_SPAN,
+                )? / settings.step.abs();
+                Ok((w, designed))
+            },
+            |tried| tried.as_ref().map_or(true, |(w, _)| *w <= target),
+        );
         let mut best: Option<(f64, f64, MpcController)> = None;
-        for &factor in &settings.noise_factors {
-            let designed = if factor > 1.0 {
-                mpc.with_swing_measurement_noise(base * factor)?
-            } else {
-                mpc.fresh_copy()?
-            };
-            let w =
-                check::velocity_wander(&designed, &model, plant, design_lag, noise, WANDER_SPAN)?
-                    / settings.step.abs();
+        for (&factor, tried) in settings.noise_factors.iter().zip(tried) {
+            let (w, designed) = tried?;
             let within = w <= target;
             if best.as_ref().is_none_or(|(b, _, _)| w < *b) || within {
                 best = Some((w, factor, designed));
-            }
-            if within {
-                break;
             }
         }
         let Some((_, factor, designed)) = best else {
@@ -919,11 +931,11 @@ pub fn select_for_control(
     // The rows are flown a batch at a time, one per core, and taken in order: each row's
     // flights depend on nothing flown before it, so the outcome is the one-by-one loop's,
     // and a batch's rows past the stop are dropped unread (errors included).
-    let batch = crate::design::parallel::threads_for(2);
+    let batch = crate::parallel::threads_for(2);
     // The candidates that passed, by their index in `checked`, as flown.
     let mut passers: Vec<(usize, LinearModel)> = Vec::new();
     'rows: for chunk in rows.chunks(batch) {
-        let outcomes = crate::design::parallel::map(chunk.iter().collect(), fly_row);
+        let outcomes = crate::parallel::map(chunk.iter().collect(), fly_row);
         for (row, outcome) in chunk.iter().zip(outcomes) {
             let beyond_look_ahead = passers
                 .first()
@@ -1043,7 +1055,7 @@ fn predicted_wander(
             loops.push((p, lag));
         }
     }
-    let figures = crate::design::parallel::map(loops, |(p, lag)| {
+    let figures = crate::parallel::map(loops, |(p, lag)| {
         check::velocity_wander(&mpc, model, p, lag, noise, WANDER_SPAN).map(|w| w / step.abs())
     })
     .into_iter()

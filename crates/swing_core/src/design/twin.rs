@@ -274,7 +274,7 @@ impl TwinPlant {
             sc
         });
         // The two flights are independent: the one without noise flies on another core.
-        let (held, clean) = crate::design::parallel::join(
+        let (held, clean) = crate::parallel::join(
             || match noisy.run_to_end() {
                 Ok(()) => Ok(noisy.fallback_reason().is_none()),
                 Err(SimError::Diverged { .. }) => Ok(false),

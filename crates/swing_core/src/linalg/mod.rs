@@ -153,20 +153,95 @@ pub fn c2d_zoh(a: &DMatrix<f64>, b: &DMatrix<f64>, dt: f64) -> (DMatrix<f64>, DM
     )
 }
 
-/// Stationary covariance P = A P Aᵀ + B Bᵀ of x⁺ = A x + B e with white unit e (A stable),
-/// by doubling: P ← P + Aᵏ P (Aᵏ)ᵀ, Aᵏ ← (Aᵏ)², until the increment is negligible.
-pub fn stationary_covariance(a: &DMatrix<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
-    let mut p = b * b.transpose();
-    let mut ak = a.clone();
-    for _ in 0..60 {
-        let inc = &ak * &p * ak.transpose();
-        p += &inc;
-        ak = &ak * &ak;
-        if inc.amax() <= 1e-15 * p.amax().max(f64::MIN_POSITIVE) {
+/// What [`stationary_covariance`] found: the covariance, or a recursion that has none.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Stationary {
+    /// ρ(A) < 1: the stationary covariance P.
+    Stable(DMatrix<f64>),
+    /// ρ(A) ≥ 1: the process has no stationary covariance.
+    Unstable,
+}
+
+/// Doublings [`stationary_covariance`] tries: 2⁶⁰ steps of the recursion summed.
+const COVARIANCE_DOUBLINGS: usize = 60;
+
+/// Stationary covariance P = A P Aᵀ + B Bᵀ of x⁺ = A x + B e with white unit e, when A is
+/// stable, or `None` as [`eigenvalues`] (a non-finite entry, no convergence).
+///
+/// By doubling: P ← P + Aʲ P (Aʲ)ᵀ, Aʲ ← (Aʲ)² (j = 2ᵏ), until the increment is negligible.
+/// The powers are the ones [`schur_stable`] squares, so they decide stability on the way
+/// with its two certificates (‖Aʲ‖₁ < ½ proves ρ < 1, |tr Aʲ| > 2n proves ρ > 1), and the
+/// eigenvalues decide only where neither fires within [`STABILITY_SQUARINGS`] doublings:
+/// one pass of products instead of a stability test and then a sum. The increment is
+/// symmetric, so only its lower triangle is formed.
+pub fn stationary_covariance(a: &DMatrix<f64>, b: &DMatrix<f64>) -> Option<Stationary> {
+    let n = a.nrows();
+    if !a.iter().chain(b.iter()).all(|v| v.is_finite()) {
+        return None;
+    }
+    if n == 0 {
+        return Some(Stationary::Stable(DMatrix::zeros(0, 0)));
+    }
+    use faer::linalg::matmul::triangular::{matmul, BlockStructure};
+    let bf = to_faer(b);
+    let mut p = &bf * bf.transpose();
+    let mut ak = to_faer(a);
+    let mut inc = faer::Mat::<f64>::zeros(n, n);
+    let mut stable = false;
+    let mut summed = false;
+    for k in 0..COVARIANCE_DOUBLINGS {
+        if !stable {
+            let norm = column_sum_norm(&ak);
+            if !norm.is_finite() {
+                break;
+            }
+            let trace: f64 = (0..n).map(|i| ak[(i, i)]).sum();
+            if norm < 0.5 {
+                stable = true;
+            } else if trace.abs() > 2.0 * n as f64 {
+                return Some(Stationary::Unstable);
+            } else if k == STABILITY_SQUARINGS {
+                if spectral_radius(a)? >= 1.0 {
+                    return Some(Stationary::Unstable);
+                }
+                stable = true;
+            }
+        }
+        let t = &ak * &p;
+        matmul(
+            inc.as_mut(),
+            BlockStructure::TriangularLower,
+            faer::Accum::Replace,
+            t.as_ref(),
+            BlockStructure::Rectangular,
+            ak.transpose(),
+            BlockStructure::Rectangular,
+            1.0,
+            faer::Par::Seq,
+        );
+        let (mut inc_max, mut p_max) = (0.0_f64, 0.0_f64);
+        for j in 0..n {
+            for i in j..n {
+                p[(i, j)] += inc[(i, j)];
+                p[(j, i)] = p[(i, j)];
+                inc_max = inc_max.max(inc[(i, j)].abs());
+                p_max = p_max.max(p[(i, j)].abs());
+            }
+        }
+        if stable && inc_max <= 1e-15 * p_max.max(f64::MIN_POSITIVE) {
+            summed = true;
             break;
         }
+        ak = &ak * &ak;
     }
-    p
+    // Overflowed powers, or 2⁶⁰ steps without settling: the eigenvalues decide.
+    if !summed && spectral_radius(a)? >= 1.0 {
+        return Some(Stationary::Unstable);
+    }
+    let p = DMatrix::from_fn(n, n, |i, j| p[(i, j)]);
+    p.iter()
+        .all(|v| v.is_finite())
+        .then_some(Stationary::Stable(p))
 }
 
 /// Standard deviation of the mean of output `c x` over `window` consecutive ticks of the
@@ -219,7 +294,7 @@ mod tests {
         ] {
             let am = DMatrix::from_element(1, 1, a);
             let bm = DMatrix::from_element(1, 1, b);
-            let p = stationary_covariance(&am, &bm);
+            let p = covariance(&am, &bm);
             let p0 = b * b / (1.0 - a * a);
             assert!(
                 (p[(0, 0)] - p0).abs() < 1e-9 * p0,
@@ -236,18 +311,93 @@ mod tests {
         // A coupled, non-normal pair against vec(P) = (I − A⊗A)⁻¹ vec(B Bᵀ).
         let a = DMatrix::from_row_slice(2, 2, &[0.8, 0.5, -0.2, 0.6]);
         let b = DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.3, 0.4]);
-        let p = stationary_covariance(&a, &b);
-        let kron = a.kronecker(&a);
-        let rhs = &b * b.transpose();
-        let vec_p = (DMatrix::<f64>::identity(4, 4) - kron)
+        assert_matches_kronecker(&a, &b, 1e-10);
+        // Larger, random and non-normal, with a slow mode (ρ = 0.999) the doubling must sum
+        // over about 2¹⁵ steps.
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        for (n, radius) in [(6usize, 0.999), (9, 0.6), (12, 0.95)] {
+            let mut a = DMatrix::from_fn(n, n, |_, _| rng.random_range(-1.0..1.0));
+            a *= radius / spectral_radius(&a).unwrap();
+            let b = DMatrix::from_fn(n, 2, |_, _| rng.random_range(-1.0..1.0));
+            assert_matches_kronecker(&a, &b, 1e-8);
+        }
+    }
+
+    /// The covariance of a recursion known to be stable.
+    fn covariance(a: &DMatrix<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
+        match stationary_covariance(a, b) {
+            Some(Stationary::Stable(p)) => p,
+            other => panic!("{a}: {other:?}"),
+        }
+    }
+
+    /// [`stationary_covariance`] against vec(P) = (I − A⊗A)⁻¹ vec(B Bᵀ), relative to max |P|.
+    fn assert_matches_kronecker(a: &DMatrix<f64>, b: &DMatrix<f64>, tol: f64) {
+        let n = a.nrows();
+        let p = covariance(a, b);
+        let rhs = b * b.transpose();
+        let vec_p = (DMatrix::<f64>::identity(n * n, n * n) - a.kronecker(a))
             .lu()
             .solve(&DVector::from_column_slice(rhs.as_slice()))
             .unwrap();
+        let scale = vec_p.amax().max(1.0);
         for (got, want) in p.iter().zip(vec_p.iter()) {
-            assert!(
-                (got - want).abs() < 1e-10 * want.abs().max(1.0),
-                "{p} vs {vec_p}"
-            );
+            assert!((got - want).abs() < tol * scale, "{p} vs {vec_p}");
+        }
+    }
+
+    #[test]
+    fn the_stationary_covariance_decides_stability_as_schur_stable_does() {
+        let stable = |a: &DMatrix<f64>| {
+            let b = DMatrix::<f64>::identity(a.nrows(), a.nrows());
+            match stationary_covariance(a, &b) {
+                Some(Stationary::Stable(p)) => {
+                    assert!(p.iter().all(|v| v.is_finite()), "{p}");
+                    Some(true)
+                }
+                Some(Stationary::Unstable) => Some(false),
+                None => None,
+            }
+        };
+        let diag = DMatrix::from_diagonal(&DVector::from_vec(vec![0.9, 1.1, 0.2]));
+        let jordan = DMatrix::from_row_slice(2, 2, &[0.99, 1e6, 0.0, 0.99]);
+        let shift = DMatrix::from_fn(5, 5, |i, j| if i == j + 1 { 1.0 } else { 0.0 });
+        let mut bad = rotation(0.5, 0.1);
+        bad[(0, 1)] = f64::NAN;
+        for m in [
+            DMatrix::zeros(0, 0),
+            DMatrix::from_diagonal_element(3, 3, 0.0),
+            diag,
+            rotation(0.999, 0.3),
+            rotation(1.001, 0.3),
+            rotation(1.0, 0.3),
+            rotation(1.0 - 1e-9, 0.3),
+            rotation(1.0 + 1e-9, 0.3),
+            jordan,
+            shift,
+            bad,
+        ] {
+            assert_eq!(stable(&m), schur_stable(&m), "{m}");
+        }
+        // Noise that does not reach the unstable mode still leaves no stationary process.
+        let hidden = DMatrix::from_diagonal(&DVector::from_vec(vec![0.5, 1.2]));
+        let b = DMatrix::from_column_slice(2, 1, &[1.0, 0.0]);
+        assert_eq!(
+            stationary_covariance(&hidden, &b),
+            Some(Stationary::Unstable)
+        );
+        assert_eq!(stable(&rotation(0.5, 0.1)), Some(true));
+        // Near the circle, on random matrices, as the eigenvalues say.
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        for trial in 0..100 {
+            let n = 2 + trial % 30;
+            let mut m = DMatrix::from_fn(n, n, |_, _| rng.random_range(-1.0..1.0));
+            let rho = spectral_radius(&m).unwrap();
+            let target =
+                1.0 + rng.random_range(1e-4..0.02) * if trial % 2 == 0 { 1.0 } else { -1.0 };
+            m *= target / rho;
+            let want = spectral_radius(&m).unwrap() < 1.0;
+            assert_eq!(stable(&m), Some(want), "trial {trial}, n {n}, ρ {target}");
         }
     }
 

@@ -166,7 +166,9 @@ impl DelayRows {
     }
 }
 
-/// Reusable rollout scorer over one test trajectory (no allocation per candidate).
+/// Reusable rollout scorer over one test trajectory (no allocation per candidate; one per
+/// thread: clone it).
+#[derive(Clone)]
 pub struct Scorer<'a> {
     traj: Trajectory<'a>,
     starts: Vec<usize>,

@@ -280,7 +280,6 @@ fn search_plan(
     if plan.iter().any(|(q, _)| *q == 0) {
         return Err(config("delays must be at least 1"));
     }
-    let (n, m) = (train.n, train.m);
     let q_score =
         super::metrics::score_delays(test.len, q_max, settings.horizon, settings.score_delays);
     let starts = start_points(test.len, q_score, settings.horizon, settings.starts)?;
@@ -298,99 +297,43 @@ fn search_plan(
         )?),
         Method::Havokc => None,
     };
+    // Each q is fitted, scored and screened on its own (side by side), then merged in the
+    // plan's order, so the table and the pick are the one-by-one loop's.
+    let per_q = crate::parallel::map(plan.iter().collect(), |(q, choice)| {
+        let mut scorer = scorer.clone();
+        fit_one_q(
+            *q,
+            choice,
+            train,
+            basis.as_ref(),
+            &mut scorer,
+            &screen,
+            settings,
+        )
+    });
     let mut table: Vec<Candidate> = Vec::new();
-    let mut tops: Vec<Top> = Vec::new();
-    let mut best: Option<usize> = None;
-    let mut input_mean = vec![0.0; m];
-    let mut sigma_of_best = Vec::new();
-    for (q, choice) in plan {
-        let q = *q;
-        let source = match &basis {
-            Some(b) => Source::Dmdc(b.svd(q)?),
-            None => Source::Havokc(HavokcSvd::new(train, q, settings.offset)?),
-        };
-        let (full, sigma) = match &source {
-            Source::Dmdc(s) => (s.rows(), s.sigma.clone()),
-            Source::Havokc(s) => (s.rows(), s.sigma.clone()),
-        };
-        input_mean = match (&basis, &source) {
-            (Some(b), _) => b.input_mean().to_vec(),
-            (None, Source::Havokc(s)) => s.input_mean().to_vec(),
-            _ => unreachable!(),
-        };
-        let ranks = choice.ranks(q, n, m, settings.offset.constant_columns(), full);
+    // The winner so far: its index in `table`, its top rows, singular values, input mean.
+    let mut best: Option<(usize, Top, Vec<f64>, Vec<f64>)> = None;
+    for outcome in per_q {
+        let QOutcome {
+            candidates,
+            winner,
+            sigma,
+            input_mean,
+        } = outcome?;
         let first = table.len();
-        let mut g = faer::Mat::<f64>::zeros(n, full);
-        let mut prev = 0;
-        for &p in &ranks {
-            let top = match &source {
-                Source::Dmdc(s) => {
-                    s.accumulate(&mut g, prev, p);
-                    prev = p;
-                    let (a, b, c) = split_g(&g, &s.features);
-                    Top { a, b, c }
-                }
-                Source::Havokc(s) => {
-                    let (a, b, c, _) = s.top(p)?;
-                    Top { a, b, c }
-                }
-            };
-            let rows = DelayRows::from_top(&top.a, &top.b, &top.c, &input_mean);
-            let score = scorer.score(&rows)?;
-            table.push(Candidate {
-                delays: q,
-                rank: p,
-                nmae: score.mean,
-                per_state: score.per_state,
-                stable: None,
-                spectral_radius: None,
-                verdict: None,
-            });
-            tops.push(top);
-        }
-        // Screen this q's candidates in ascending NMAE order until the first stable one.
-        let mut order: Vec<usize> = (first..table.len())
-            .filter(|i| table[*i].nmae.is_finite())
-            .collect();
-        order.sort_by(|a, b| table[*a].nmae.total_cmp(&table[*b].nmae));
-        for i in order {
-            let t = &tops[i];
-            let model = delay_form(
-                settings.method.name(),
-                settings.dt,
-                q,
-                table[i].rank,
-                settings.offset,
-                input_mean.clone(),
-                &t.a,
-                &t.b,
-                &t.c,
-            );
-            let verdict = screen.judge(&model.a)?;
-            let ok = verdict.stable;
-            table[i].spectral_radius = Some(verdict.spectral_radius);
-            table[i].stable = Some(ok);
-            table[i].verdict = Some(verdict);
-            if ok {
-                if best.is_none_or(|b| table[i].nmae < table[b].nmae) {
-                    best = Some(i);
-                    sigma_of_best = sigma.clone();
-                }
-                break;
-            }
-        }
-        // Keep only what the winner needs.
-        for (i, t) in tops.iter_mut().enumerate().skip(first) {
-            if Some(i) != best {
-                *t = Top {
-                    a: DMatrix::zeros(0, 0),
-                    b: DMatrix::zeros(0, 0),
-                    c: DVector::zeros(0),
-                };
+        table.extend(candidates);
+        if let Some((i, top)) = winner {
+            let i = first + i;
+            if best
+                .as_ref()
+                .is_none_or(|(b, ..)| table[i].nmae < table[*b].nmae)
+            {
+                best = Some((i, top, sigma, input_mean));
             }
         }
     }
-    let Some(bi) = best else {
+    let Some((bi, t, sigma_of_best, input_mean)) = best else {
         return Err(SysidError::Identification(format!(
             "no stable candidate among {} (every model diverged or has a mode growing more \
              than {}× over the {}-sample prediction horizon besides the velocity integrator; \
@@ -401,7 +344,6 @@ fn search_plan(
         )));
     };
     let c = &table[bi];
-    let t = &tops[bi];
     let mut model = delay_form(
         settings.method.name(),
         settings.dt,
@@ -428,6 +370,104 @@ fn search_plan(
         table,
         best: bi,
         model,
+    })
+}
+
+/// One q of a plan: its candidates in rank order, and the first stable one in ascending
+/// NMAE (its index among them and its top rows), the q's singular values and input mean.
+struct QOutcome {
+    candidates: Vec<Candidate>,
+    winner: Option<(usize, Top)>,
+    sigma: Vec<f64>,
+    input_mean: Vec<f64>,
+}
+
+/// Fit and score every rank of delay count `q`, then screen them in ascending NMAE until
+/// the first stable one.
+fn fit_one_q(
+    q: usize,
+    choice: &RankChoice,
+    train: &Trajectory<'_>,
+    basis: Option<&DmdcBasis>,
+    scorer: &mut Scorer<'_>,
+    screen: &Screen,
+    settings: &SearchSettings,
+) -> Result<QOutcome, SysidError> {
+    let (n, m) = (train.n, train.m);
+    let source = match basis {
+        Some(b) => Source::Dmdc(b.svd(q)?),
+        None => Source::Havokc(HavokcSvd::new(train, q, settings.offset)?),
+    };
+    let (full, sigma, input_mean) = match (&source, basis) {
+        (Source::Dmdc(s), Some(b)) => (s.rows(), s.sigma.clone(), b.input_mean().to_vec()),
+        (Source::Havokc(s), _) => (s.rows(), s.sigma.clone(), s.input_mean().to_vec()),
+        (Source::Dmdc(_), None) => unreachable!("a DMDc source comes from a basis"),
+    };
+    let ranks = choice.ranks(q, n, m, settings.offset.constant_columns(), full);
+    let mut candidates = Vec::with_capacity(ranks.len());
+    let mut tops = Vec::with_capacity(ranks.len());
+    let mut g = faer::Mat::<f64>::zeros(n, full);
+    let mut prev = 0;
+    for &p in &ranks {
+        let top = match &source {
+            Source::Dmdc(s) => {
+                s.accumulate(&mut g, prev, p);
+                prev = p;
+                let (a, b, c) = split_g(&g, &s.features);
+                Top { a, b, c }
+            }
+            Source::Havokc(s) => {
+                let (a, b, c, _) = s.top(p)?;
+                Top { a, b, c }
+            }
+        };
+        let rows = DelayRows::from_top(&top.a, &top.b, &top.c, &input_mean);
+        let score = scorer.score(&rows)?;
+        candidates.push(Candidate {
+            delays: q,
+            rank: p,
+            nmae: score.mean,
+            per_state: score.per_state,
+            stable: None,
+            spectral_radius: None,
+            verdict: None,
+        });
+        tops.push(Some(top));
+    }
+    // Screen this q's candidates in ascending NMAE order until the first stable one.
+    let mut order: Vec<usize> = (0..candidates.len())
+        .filter(|i| candidates[*i].nmae.is_finite())
+        .collect();
+    order.sort_by(|a, b| candidates[*a].nmae.total_cmp(&candidates[*b].nmae));
+    let mut winner = None;
+    for i in order {
+        let t = tops[i].as_ref().expect("each top is taken once");
+        let model = delay_form(
+            settings.method.name(),
+            settings.dt,
+            q,
+            candidates[i].rank,
+            settings.offset,
+            input_mean.clone(),
+            &t.a,
+            &t.b,
+            &t.c,
+        );
+        let verdict = screen.judge(&model.a)?;
+        let ok = verdict.stable;
+        candidates[i].spectral_radius = Some(verdict.spectral_radius);
+        candidates[i].stable = Some(ok);
+        candidates[i].verdict = Some(verdict);
+        if ok {
+            winner = tops[i].take().map(|top| (i, top));
+            break;
+        }
+    }
+    Ok(QOutcome {
+        candidates,
+        winner,
+        sigma,
+        input_mean,
     })
 }
 
