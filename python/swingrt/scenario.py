@@ -28,6 +28,18 @@ def builtin(kind: str) -> Scenario:
     return Scenario.builtin(kind)
 
 
+def scaled_inertia(nominal: dict[str, Any], mass: float, arm: float | None = None) -> list[float]:
+    """The inertia [kg m²] of a vehicle like ``nominal`` (a scenario's ``vehicle`` table) that
+    weighs ``mass`` [kg] on arms of ``arm`` [m] (``nominal``'s by default): the same mass
+    distribution, so each moment scales with the mass and the arm squared. The one rule for
+    a vehicle whose inertia is not known (a twin weighed at another mass, a vehicle read
+    from PX4's parameters)."""
+    scale = mass / float(nominal["mass"])
+    if arm is not None:
+        scale *= (arm / float(nominal["arm"])) ** 2
+    return [i * scale for i in nominal["inertia"]]
+
+
 def read_text(path: str | os.PathLike) -> str:
     """Read a TOML file's text (a scenario, a mission); a missing or undecodable file is a
     ``ConfigError``."""

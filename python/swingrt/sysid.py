@@ -36,6 +36,7 @@ import numpy as np
 
 from swingrt import _core
 from swingrt.errors import ConfigError, DataError, IdentificationError, ModelError
+from swingrt.scenario import scaled_inertia
 
 __all__ = [
     "AXES",
@@ -633,7 +634,7 @@ def builtin_twin(vehicle_mass: float) -> _core.Scenario:
             "vehicle": {
                 "mass": float(vehicle_mass),
                 "thrust_poly": [c * scale for c in vehicle["thrust_poly"]],
-                "inertia": [i * scale for i in vehicle["inertia"]],
+                "inertia": scaled_inertia(vehicle, float(vehicle_mass)),
             }
         }
     )

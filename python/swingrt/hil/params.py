@@ -15,6 +15,7 @@ import math
 
 from swingrt._core import Scenario
 from swingrt.errors import ConfigError
+from swingrt.scenario import scaled_inertia
 
 __all__ = [
     "HIL_RATE_GAIN_SCALE",
@@ -239,9 +240,8 @@ def vehicle_from_px4(
         f"vehicle {vehicle['mass']:.3f} kg: the take-off mass less the "
         f"{sum(carried.values()):.3f} kg payload it hovered with"
     )
-    m0, d0 = float(b["vehicle"]["mass"]), float(b["vehicle"]["arm"])
-    scale = vehicle["mass"] / m0 * (arm / d0) ** 2
-    vehicle["inertia"] = [i * scale for i in b["vehicle"]["inertia"]]
+    vehicle["inertia"] = scaled_inertia(b["vehicle"], vehicle["mass"], arm)
+    scale = vehicle["inertia"][0] / float(b["vehicle"]["inertia"][0])
     notes.append(
         f"inertia nominal x {scale:.3f} (mass x arm^2); drag, motor lag "
         f"{vehicle['motor_tau'] * 1e3:.0f} ms and loop rates nominal: not in PX4's parameters"
