@@ -935,7 +935,9 @@ def test_the_builtin_twin_weighs_the_vehicle_and_hovers_as_the_builtin_does(mass
     assert scaled.hover_thrust() == pytest.approx(base.hover_thrust(), rel=1e-9)
 
 
-@pytest.mark.parametrize("mass", [0.0, -1.0, math.nan, math.inf])
+@pytest.mark.parametrize("mass", [0.0, -1.0, math.nan, math.inf, 0.05])
 def test_a_twin_of_no_mass_is_refused_by_name(mass):
+    """No mass, or one so small that the twin's motors, scaled to it, cannot lift even the
+    built-in payload: refused naming the vehicle's mass, not a payload field."""
     with pytest.raises(ConfigError, match="vehicle_mass"):
         sysid.builtin_twin(mass)

@@ -629,15 +629,21 @@ def builtin_twin(vehicle_mass: float) -> _core.Scenario:
             f"vehicle_mass must be a positive number of kg, not {vehicle_mass}",
             field="vehicle_mass",
         )
-    return twin.with_overrides(
-        {
-            "vehicle": {
-                "mass": float(vehicle_mass),
-                "thrust_poly": [c * scale for c in vehicle["thrust_poly"]],
-                "inertia": scaled_inertia(vehicle, float(vehicle_mass)),
+    try:
+        return twin.with_overrides(
+            {
+                "vehicle": {
+                    "mass": float(vehicle_mass),
+                    "thrust_poly": [c * scale for c in vehicle["thrust_poly"]],
+                    "inertia": scaled_inertia(vehicle, float(vehicle_mass)),
+                }
             }
-        }
-    )
+        )
+    except ConfigError as e:
+        raise ConfigError(
+            f"vehicle_mass {vehicle_mass:g} kg: the built-in twin scaled to it is refused ({e})",
+            field="vehicle_mass",
+        ) from e
 
 
 def check_plant(
