@@ -193,7 +193,9 @@ pub fn stationary_covariance(a: &DMatrix<f64>, b: &DMatrix<f64>) -> Option<Stati
         if !stable {
             let norm = column_sum_norm(&ak);
             if !norm.is_finite() {
-                break;
+                // Powers past f64 before either certificate: unstable by the eigenvalues,
+                // else a transient too large for the sum to mean anything.
+                return (spectral_radius(a)? >= 1.0).then_some(Stationary::Unstable);
             }
             let trace: f64 = (0..n).map(|i| ak[(i, i)]).sum();
             if norm < 0.5 {
@@ -234,7 +236,7 @@ pub fn stationary_covariance(a: &DMatrix<f64>, b: &DMatrix<f64>) -> Option<Stati
         }
         ak = &ak * &ak;
     }
-    // Overflowed powers, or 2⁶⁰ steps without settling: the eigenvalues decide.
+    // 2⁶⁰ steps without settling: the eigenvalues decide.
     if !summed && spectral_radius(a)? >= 1.0 {
         return Some(Stationary::Unstable);
     }
