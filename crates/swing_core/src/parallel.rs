@@ -31,7 +31,8 @@ pub fn join<A: Send, B: Send>(
 /// to and including the first that is done, in order. Items past the first may start ahead
 /// on a core that would otherwise idle (each later item is offered to the pool while the
 /// ones before it run); an item nobody took ahead runs only if none before it was done. So
-/// the results are the loop's, and the time that of the loop or less.
+/// the results are the loop's. The time is the loop's or less, except that an item already
+/// taken ahead is waited for even when one before it turns out done.
 pub fn until<I: Sync, T: Send>(
     items: &[I],
     f: impl Fn(&I) -> T + Sync,

@@ -392,15 +392,25 @@ mod tests {
         // Near the circle, on random matrices, as the eigenvalues say.
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
         for trial in 0..100 {
-            let n = 2 + trial % 30;
-            let mut m = DMatrix::from_fn(n, n, |_, _| rng.random_range(-1.0..1.0));
-            let rho = spectral_radius(&m).unwrap();
-            let target =
-                1.0 + rng.random_range(1e-4..0.02) * if trial % 2 == 0 { 1.0 } else { -1.0 };
-            m *= target / rho;
+            let (m, target) = near_circle(&mut rng, 2 + trial % 30, trial % 2 == 0);
+            let n = m.nrows();
             let want = spectral_radius(&m).unwrap() < 1.0;
             assert_eq!(stable(&m), Some(want), "trial {trial}, n {n}, ρ {target}");
         }
+    }
+
+    /// A random n × n matrix scaled to a spectral radius within 2 % of 1, never closer than
+    /// 1e-4, outside the circle or inside it; and that radius.
+    fn near_circle(
+        rng: &mut rand_chacha::ChaCha8Rng,
+        n: usize,
+        outside: bool,
+    ) -> (DMatrix<f64>, f64) {
+        let mut m = DMatrix::from_fn(n, n, |_, _| rng.random_range(-1.0..1.0));
+        let rho = spectral_radius(&m).unwrap();
+        let target = 1.0 + rng.random_range(1e-4..0.02) * if outside { 1.0 } else { -1.0 };
+        m *= target / rho;
+        (m, target)
     }
 
     #[test]
@@ -435,13 +445,8 @@ mod tests {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         let mut seen = [0usize; 2];
         for trial in 0..200 {
-            let n = 2 + trial % 40;
-            let mut m = DMatrix::from_fn(n, n, |_, _| rng.random_range(-1.0..1.0));
-            let rho = spectral_radius(&m).unwrap();
-            // Scale to a radius within ±2 % of 1, never closer than 1e-4.
-            let target =
-                1.0 + rng.random_range(1e-4..0.02) * if trial % 2 == 0 { 1.0 } else { -1.0 };
-            m *= target / rho;
+            let (m, target) = near_circle(&mut rng, 2 + trial % 40, trial % 2 == 0);
+            let n = m.nrows();
             let want = spectral_radius(&m).unwrap() < 1.0;
             assert_eq!(
                 schur_stable(&m),
