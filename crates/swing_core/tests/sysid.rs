@@ -652,3 +652,61 @@ fn a_double_pendulum_is_found_with_its_links_and_a_single_one_is_not() {
         );
     }
 }
+
+#[test]
+fn whitebox_affine_offset_recovers_a_residual_affine_in_the_velocity() {
+    // Data from the white-box's own delay form plus a residual c0 + β·v_k per row (drag in a
+    // wind, and drag read as swing): the affine offset must find both, exactly.
+    let params = PendulumModel {
+        m_p: 0.25,
+        l: 1.5,
+        ..Default::default()
+    };
+    let dt = 0.03;
+    let mut model = whitebox::model(&params, 1, dt, None).unwrap();
+    let (c0, beta) = ([0.002, -1e-4], [-0.003, 4e-4]);
+    let mut rng = Rng::new(5);
+    let len = 2000;
+    let us: Vec<f64> = (0..len).map(|_| 2.0 * rng.next()).collect();
+    let mut x = vec![0.0; 2 * len];
+    for k in 1..len - 1 {
+        for i in 0..2 {
+            let mut next = model.b[(i, 0)] * us[k] + c0[i] + beta[i] * x[2 * k];
+            for j in 0..2 {
+                next += model.a[(i, j)] * x[2 * k + j] + model.a[(i, 2 + j)] * x[2 * (k - 1) + j];
+            }
+            x[2 * (k + 1) + i] = next;
+        }
+    }
+    let traj = Trajectory::new(&x, 2, &us, 1).unwrap();
+    let a_before = model.a.clone();
+    whitebox::apply_offset(&mut model, &traj, Offset::Affine).unwrap();
+    for i in 0..2 {
+        assert!((model.c[i] - c0[i]).abs() < 1e-9, "c[{i}] = {}", model.c[i]);
+        assert!((model.a[(i, 0)] - a_before[(i, 0)] - beta[i]).abs() < 1e-9);
+    }
+    let slopes = model
+        .diagnostics
+        .whitebox
+        .unwrap()
+        .velocity_residual
+        .unwrap();
+    assert!((slopes[0] - beta[0]).abs() < 1e-9 && (slopes[1] - beta[1]).abs() < 1e-9);
+
+    // A flight at one constant speed says nothing of the slope: the mean residual alone.
+    let mut flat = whitebox::model(&params, 1, dt, None).unwrap();
+    let xs: Vec<f64> = (0..len).flat_map(|_| [1.0, 0.0]).collect();
+    let zeros = vec![0.0; len];
+    let traj = Trajectory::new(&xs, 2, &zeros, 1).unwrap();
+    let pred = flat.predict(&xs[..4], &zeros[1..2]).unwrap();
+    whitebox::apply_offset(&mut flat, &traj, Offset::Affine).unwrap();
+    let slopes = flat
+        .diagnostics
+        .whitebox
+        .unwrap()
+        .velocity_residual
+        .unwrap();
+    assert_eq!(slopes, vec![0.0, 0.0]);
+    assert!((flat.c[0] - (1.0 - pred[0])).abs() < 1e-12);
+    assert!((flat.c[1] - (0.0 - pred[1])).abs() < 1e-12);
+}

@@ -39,7 +39,9 @@ pub enum Offset {
     None,
     /// Subtract the training input mean (the thesis's choice).
     Mean,
-    /// Learn a constant column `c` (default; predicts better on held-out data).
+    /// Learn a constant column `c` (default; predicts better on held-out data); the
+    /// white-box learns its residual's term in the velocity beside it
+    /// (`whitebox::apply_offset`).
     #[default]
     Affine,
 }
@@ -103,6 +105,12 @@ pub struct WhiteboxEstimates {
     /// flight tells it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub attitude_lag: Option<f64>,
+    /// With the `affine` offset: each state row's one-step residual per m/s of its axis's
+    /// velocity, added to the model's newest-velocity column (`whitebox::apply_offset`): the
+    /// airframe's drag and, for a swing estimated from the IMU, the drag it reads as swing
+    /// [state unit per tick per m/s].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub velocity_residual: Option<Vec<f64>>,
 }
 
 /// Diagnostics stored with a model.

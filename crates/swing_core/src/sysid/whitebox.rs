@@ -257,12 +257,24 @@ pub fn model(
         fft_length: None,
         swing_noise: None,
         attitude_lag: None,
+        velocity_residual: None,
     });
     Ok(out)
 }
 
 /// Apply the offset handling to a white-box model using training data: `mean` subtracts the
-/// training input mean; `affine` sets c to the mean one-step residual of the model.
+/// training input mean; `affine` learns the one-step residual of each state as a constant
+/// plus a term in its axis's velocity, by least squares over the training flight.
+///
+/// Why the velocity term: what the pendulum model leaves out of a flight is mostly the
+/// airframe's drag, −c_d (v − w) in the wind w, and, for a swing estimated from the IMU, the
+/// same drag read as swing (`crate::sensors::swing`). Both are affine in the velocity. A
+/// constant alone would carry the drag at the training flight's mean speed as a disturbance
+/// at every speed, hover included: the closed-loop check then starts its hover on a push
+/// the flight does not have (on a long cable, read as several degrees of swing). The
+/// velocity coefficients go into the model's newest-velocity column and are recorded in
+/// `diagnostics.whitebox.velocity_residual`; a flight whose velocity barely varies gets the
+/// constant alone.
 pub fn apply_offset(
     model: &mut LinearModel,
     traj: &Trajectory<'_>,
@@ -282,22 +294,51 @@ pub fn apply_offset(
             if traj.len < q + 1 {
                 return Err(data("too few samples to learn the affine offset"));
             }
-            let mut resid = vec![0.0; n];
-            for k in (q - 1)..traj.len - 1 {
+            // States are [v_1…v_a, θ_1…θ_a]: row i belongs to axis i mod a.
+            let axes = n / 2;
+            let velocity = |i: usize| i % axes.max(1);
+            let rows = traj.len - q;
+            let mut resid = DMatrix::<f64>::zeros(rows, n);
+            for (r, k) in ((q - 1)..traj.len - 1).enumerate() {
                 let hist = &traj.x[(k + 1 - q) * n..(k + 1) * n];
                 let pred = model.predict(hist, traj.input(k))?;
-                for (i, r) in resid.iter_mut().enumerate() {
-                    *r += traj.state(k + 1)[i] - pred[i];
+                for i in 0..n {
+                    resid[(r, i)] = traj.state(k + 1)[i] - pred[i];
                 }
             }
-            let count = (traj.len - q) as f64;
-            for (i, r) in resid.iter().enumerate() {
-                model.c[i] += r / count;
+            let mut slopes = vec![0.0; n];
+            for i in 0..n {
+                let v: Vec<f64> = ((q - 1)..traj.len - 1)
+                    .map(|k| traj.state(k)[velocity(i)])
+                    .collect();
+                let (c0, slope) = affine_fit(&v, resid.column(i).as_slice());
+                model.c[i] += c0;
+                // The newest frame's velocity column of row i.
+                model.a[(i, velocity(i))] += slope;
+                slopes[i] = slope;
+            }
+            if let Some(wb) = model.diagnostics.whitebox.as_mut() {
+                wb.velocity_residual = Some(slopes);
             }
         }
     }
     model.fingerprint = traj.fingerprint();
     Ok(())
+}
+
+/// Least-squares (intercept, slope) of `y` on `x`; a slope of 0 (the mean alone) where `x`
+/// barely varies (a spread below 1 mm/s).
+fn affine_fit(x: &[f64], y: &[f64]) -> (f64, f64) {
+    let count = x.len() as f64;
+    let mx = x.iter().sum::<f64>() / count;
+    let my = y.iter().sum::<f64>() / count;
+    let sxx: f64 = x.iter().map(|a| (a - mx) * (a - mx)).sum();
+    let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
+    if sxx / count < 1e-6 {
+        return (my, 0.0);
+    }
+    let slope = sxy / sxx;
+    (my - slope * mx, slope)
 }
 
 /// Standard deviation of white noise on a smooth `signal`, from its third differences: white
