@@ -306,12 +306,13 @@ pub fn apply_offset(
                     resid[(r, i)] = traj.state(k + 1)[i] - pred[i];
                 }
             }
+            // Each axis's velocity at the newest frame of every residual's history.
+            let speeds: Vec<Vec<f64>> = (0..axes.max(1))
+                .map(|ax| ((q - 1)..traj.len - 1).map(|k| traj.state(k)[ax]).collect())
+                .collect();
             let mut slopes = vec![0.0; n];
             for i in 0..n {
-                let v: Vec<f64> = ((q - 1)..traj.len - 1)
-                    .map(|k| traj.state(k)[velocity(i)])
-                    .collect();
-                let (c0, slope) = affine_fit(&v, resid.column(i).as_slice());
+                let (c0, slope) = affine_fit(&speeds[velocity(i)], resid.column(i).as_slice());
                 model.c[i] += c0;
                 // The newest frame's velocity column of row i.
                 model.a[(i, velocity(i))] += slope;
