@@ -631,7 +631,24 @@ fn a_double_pendulum_is_found_with_its_links_and_a_single_one_is_not() {
         assert!((d.length2 - 0.6).abs() < 0.06, "{d:?}");
         assert!((d.mass_ratio - 0.275).abs() < 0.05, "{d:?}");
     }
-    for length in [0.5, 1.5] {
+    // A long cable with the heavier mass below: the second link lowers the single
+    // pendulum's simulation error by a few per cent only, and must still be found.
+    let heavy_below = PayloadParams {
+        kind: PayloadKind::Double,
+        mass: 0.15,
+        length: 1.0,
+        mass2: 0.19,
+        length2: 0.6,
+        ..PayloadParams::default()
+    };
+    let (v, th) = training(heavy_below, 0.01);
+    let d = links::fit(&v, &th, 0.03, &links::LinkSettings::default())
+        .and_then(|fit| fit.double)
+        .expect("no second link found below a long cable");
+    assert!((d.length - 1.0).abs() < 0.15, "{d:?}");
+    assert!((d.length2 - 0.6).abs() < 0.1, "{d:?}");
+    assert!((d.mass_ratio - 1.27).abs() < 0.3, "{d:?}");
+    for length in [0.5, 1.5, 2.8] {
         let single = PayloadParams {
             mass: 0.3,
             length,

@@ -23,8 +23,17 @@
 //! refined by instrumental variables (Young's refined IV, simplified): the swing of the
 //! current estimate, simulated noise-free from the measured velocity, stands in for the
 //! measured one in the regressors, until the estimate settles. Started from a few physical
-//! guesses; the double pendulum is reported when it is physical and its simulated swing
-//! matches the measured one clearly better than the single pendulum's does.
+//! guesses; the double pendulum is reported when it is physical, its simulated swing
+//! matches the measured one no worse than the single pendulum's, and its second mode is one
+//! the data can show and that matters: below the filter's corner (above it the filter has
+//! taken the mode out of the data, and what is fitted there is the noise's) and carrying a
+//! share of the upper link's static answer to the vehicle's acceleration ([`mode_share`]).
+//!
+//! The simulation error alone does not tell the two apart on long cables: over a flight of
+//! minutes the single pendulum's error is mostly the slow phase drift of a lightly damped
+//! swing, and a real second link with a heavy lower mass lowers it by 1–6 % only, no more
+//! than a spurious fit to a single pendulum does. The second mode's place and share do:
+//! spurious fits put it above the corner or give it almost nothing.
 
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
@@ -46,8 +55,12 @@ pub struct LinkSettings {
     /// forever on a start that is off).
     pub instrument_damping: f64,
     /// Smallest relative drop of the swing's simulation error that adopts the double
-    /// pendulum over the single one.
+    /// pendulum over the single one (0: no worse).
     pub min_improvement: f64,
+    /// Smallest share of the upper link's static answer that the second mode must carry
+    /// ([`mode_share`]) for the double pendulum to be adopted: below it the second link
+    /// changes nothing an MPC could excite.
+    pub min_mode_share: f64,
     /// Largest mass ratio m₂/m₁ taken as physical.
     pub max_mass_ratio: f64,
 }
@@ -59,7 +72,8 @@ impl Default for LinkSettings {
             iterations: 10,
             settle: 5.0,
             instrument_damping: 0.05,
-            min_improvement: 0.1,
+            min_improvement: 0.0,
+            min_mode_share: 0.01,
             max_mass_ratio: 10.0,
         }
     }
@@ -76,6 +90,13 @@ pub struct DoublePendulum {
     pub mass_ratio: f64,
     /// Error of the double pendulum's simulated swing over the single pendulum's (RMS).
     pub error_ratio: f64,
+    /// Rate of the second mode ω₂ [rad/s] ([`mode_share`]); 0 in files written before it was
+    /// recorded.
+    #[serde(default)]
+    pub second_mode: f64,
+    /// The second mode's share of the upper link's static answer ([`mode_share`]).
+    #[serde(default)]
+    pub mode_share: f64,
 }
 
 /// Coefficients of the filtered equation: [α, δ₃, β, δ₁, γ, bias] (δ: damping terms).
@@ -271,6 +292,21 @@ fn links(coef: &Coefficients, max_mass_ratio: f64) -> Option<(f64, f64, f64)> {
     (l1 > 0.0 && l2 > 0.0 && mu > 0.0 && mu <= max_mass_ratio).then_some((l1, l2, mu))
 }
 
+/// The two modes of physical links (l₁, l₂, μ): their rates ω₁ < ω₂ [rad/s] and the second
+/// mode's share of the upper link's static answer to the vehicle's acceleration, |r₂/x₂| /
+/// |r₁/x₁|, where θ₁/a = r₁/(s² − x₁) + r₂/(s² − x₂) and x = −ω² (the two parts add up to the
+/// static −1/g).
+pub fn mode_share(l1: f64, l2: f64, mu: f64) -> (f64, f64, f64) {
+    let [alpha, _, beta, _, gamma, _] = from_links(l1, l2, mu);
+    // α x² + β x + 1 = 0 in x = s²: two negative roots for any physical links.
+    let disc = (beta * beta - 4.0 * alpha).max(0.0).sqrt();
+    let x1 = (-beta + disc) / (2.0 * alpha);
+    let x2 = (-beta - disc) / (2.0 * alpha);
+    let residue = |xi: f64, xj: f64| -(gamma * xi + 1.0 / GRAVITY) / (alpha * (xi - xj));
+    let share = (residue(x2, x1) / x2).abs() / (residue(x1, x2) / x1).abs();
+    ((-x1).sqrt(), (-x2).sqrt(), share)
+}
+
 /// Coefficients of physical links (inverse of [`links`]).
 fn from_links(l1: f64, l2: f64, mu: f64) -> Coefficients {
     let g2 = GRAVITY * GRAVITY;
@@ -400,11 +436,15 @@ pub fn fit(v: &[f64], theta: &[f64], dt: f64, settings: &LinkSettings) -> Option
     }
     let double = best.and_then(|(err, (length, length2, mass_ratio))| {
         let error_ratio = err / single_error;
-        (error_ratio <= 1.0 - settings.min_improvement).then_some(DoublePendulum {
+        let (_, second_mode, share) = mode_share(length, length2, mass_ratio);
+        let seen = second_mode < settings.filter_rate && share >= settings.min_mode_share;
+        (seen && error_ratio < 1.0 - settings.min_improvement).then_some(DoublePendulum {
             length,
             length2,
             mass_ratio,
             error_ratio,
+            second_mode,
+            mode_share: share,
         })
     });
     Some(LinkFit {
@@ -417,6 +457,32 @@ pub fn fit(v: &[f64], theta: &[f64], dt: f64, settings: &LinkSettings) -> Option
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn mode_rates_of_equal_links_match_the_closed_form() {
+        // Equal links l: ω² = (g/l)(1 + μ ± √(μ(1 + μ))).
+        let l = 0.7;
+        for mu in [0.05, 0.3, 1.0, 4.0] {
+            let (w1, w2, share) = mode_share(l, l, mu);
+            let root = (mu * (1.0 + mu)).sqrt();
+            let want1 = (GRAVITY / l * (1.0 + mu - root)).sqrt();
+            let want2 = (GRAVITY / l * (1.0 + mu + root)).sqrt();
+            assert!(
+                (w1 - want1).abs() < 1e-9 && (w2 - want2).abs() < 1e-9,
+                "μ = {mu}"
+            );
+            assert!(share > 0.0 && share.is_finite(), "μ = {mu}: {share}");
+        }
+        // A vanishing lower mass leaves the second mode nothing of the static answer.
+        let shares: Vec<f64> = [0.3, 0.03, 0.003]
+            .iter()
+            .map(|&mu| mode_share(1.0, 0.5, mu).2)
+            .collect();
+        assert!(
+            shares[0] > shares[1] && shares[1] > shares[2] && shares[2] < 5e-3,
+            "{shares:?}"
+        );
+    }
 
     #[test]
     fn filter_derivatives_of_a_sine_match_the_closed_form() {
