@@ -472,6 +472,9 @@ def identify(data: Any, *, axes: str = "n", **settings: Any) -> LinearModel:
     if s["search"]:
         rest = {k: v for k, v in s.items() if k not in ("delays", "rank")}
         return search(data, axes=axes, **rest).model
+    if swing_source(data) == "imu":
+        # The swing is the IMU's estimate: the white-box asks more of a second link.
+        s = {**s, "imu_swing": True}
     x, u, states, inputs = _prepare(data, axes, s)
     mass = None
     if s["method"] == "whitebox" and s["payload_mass"] is None:

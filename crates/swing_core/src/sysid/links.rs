@@ -61,6 +61,9 @@ pub struct LinkSettings {
     /// ([`mode_share`]) for the double pendulum to be adopted: below it the second link
     /// changes nothing an MPC could excite.
     pub min_mode_share: f64,
+    /// Highest rate of the second mode that is adopted, as a fraction of `filter_rate`:
+    /// above the corner the filter has taken the mode out of the data.
+    pub max_second_mode: f64,
     /// Largest mass ratio m₂/m₁ taken as physical.
     pub max_mass_ratio: f64,
 }
@@ -74,7 +77,26 @@ impl Default for LinkSettings {
             instrument_damping: 0.05,
             min_improvement: 0.0,
             min_mode_share: 0.01,
+            max_second_mode: 1.0,
             max_mass_ratio: 10.0,
+        }
+    }
+}
+
+impl LinkSettings {
+    /// The evidence asked of a swing estimated from the IMU (`sensors::swing`): a 10 % drop
+    /// of the simulation error, whatever the second mode. That swing is computed from the
+    /// vehicle's own acceleration, so it carries the airframe's drag and the attitude loop's
+    /// answer beside the cable's pull, and the double pendulum's extra terms fit them as a
+    /// second link: on `robustness-imu` (seed 1) single payloads on 2.1 and 2.4 m (samples
+    /// 213, 206) came out as two links of 1.2–1.7 m whose second mode carried 14–22 % of the
+    /// static answer at a 1–6 % lower error, and no candidate then passed on the twin.
+    pub fn for_imu_swing() -> Self {
+        Self {
+            min_improvement: 0.1,
+            min_mode_share: 0.0,
+            max_second_mode: f64::INFINITY,
+            ..Self::default()
         }
     }
 }
@@ -437,8 +459,9 @@ pub fn fit(v: &[f64], theta: &[f64], dt: f64, settings: &LinkSettings) -> Option
     let double = best.and_then(|(err, (length, length2, mass_ratio))| {
         let error_ratio = err / single_error;
         let (_, second_mode, share) = mode_share(length, length2, mass_ratio);
-        let seen = second_mode < settings.filter_rate && share >= settings.min_mode_share;
-        (seen && error_ratio < 1.0 - settings.min_improvement).then_some(DoublePendulum {
+        let seen = second_mode < settings.max_second_mode * settings.filter_rate
+            && share >= settings.min_mode_share;
+        (seen && error_ratio <= 1.0 - settings.min_improvement).then_some(DoublePendulum {
             length,
             length2,
             mass_ratio,

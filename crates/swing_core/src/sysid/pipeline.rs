@@ -267,7 +267,12 @@ pub fn whitebox_model(
             let v: Vec<f64> = (0..train.len).map(|k| train.state(k)[j - axes]).collect();
             // The swing's answer to the vehicle's motion fixes the length whatever the
             // flight's spectrum; the FFT peak (eq. 4.8) stands in when that fit fails.
-            let fitted = links::fit(&v, &swing, settings.dt, &LinkSettings::default());
+            let rule = if settings.imu_swing {
+                LinkSettings::for_imu_swing()
+            } else {
+                LinkSettings::default()
+            };
+            let fitted = links::fit(&v, &swing, settings.dt, &rule);
             links = fitted.and_then(|fit| fit.double);
             (fitted.map_or(l_fft, |fit| fit.length), Some(f))
         }

@@ -155,6 +155,11 @@ pub struct IdentifySettings {
     pub friction: f64,
     /// White-box: band searched for the swing's FFT peak [Hz].
     pub swing_band: [f64; 2],
+    /// White-box: the swing is the IMU's estimate, not a sensor's: a second link is then
+    /// adopted only on [`LinkSettings::for_imu_swing`]'s stricter evidence.
+    ///
+    /// [`LinkSettings::for_imu_swing`]: super::links::LinkSettings::for_imu_swing
+    pub imu_swing: bool,
 }
 
 impl Default for IdentifySettings {
@@ -188,6 +193,7 @@ impl Default for IdentifySettings {
             vehicle_mass: crate::plant::params::VehicleParams::default().mass,
             friction: 0.0,
             swing_band: [0.1, 3.0],
+            imu_swing: false,
         }
     }
 }
