@@ -27,7 +27,7 @@
 //! matches the measured one no worse than the single pendulum's, and its second mode is one
 //! the data can show and that matters: below the filter's corner (above it the filter has
 //! taken the mode out of the data, and what is fitted there is the noise's) and carrying a
-//! share of the upper link's static answer to the vehicle's acceleration ([`mode_share`]).
+//! share of the upper link's static answer to the vehicle's acceleration ([`modes`]).
 //!
 //! The simulation error alone does not tell the two apart on long cables: over a flight of
 //! minutes the single pendulum's error is mostly the slow phase drift of a lightly damped
@@ -58,7 +58,7 @@ pub struct LinkSettings {
     /// pendulum over the single one (0: no worse).
     pub min_improvement: f64,
     /// Smallest share of the upper link's static answer that the second mode must carry
-    /// ([`mode_share`]) for the double pendulum to be adopted: below it the second link
+    /// ([`modes`]) for the double pendulum to be adopted: below it the second link
     /// changes nothing an MPC could excite.
     pub min_mode_share: f64,
     /// Highest rate of the second mode that is adopted, as a fraction of `filter_rate`:
@@ -112,11 +112,11 @@ pub struct DoublePendulum {
     pub mass_ratio: f64,
     /// Error of the double pendulum's simulated swing over the single pendulum's (RMS).
     pub error_ratio: f64,
-    /// Rate of the second mode ω₂ [rad/s] ([`mode_share`]); 0 in files written before it was
+    /// Rate of the second mode ω₂ [rad/s] ([`modes`]); 0 in files written before it was
     /// recorded.
     #[serde(default)]
     pub second_mode: f64,
-    /// The second mode's share of the upper link's static answer ([`mode_share`]).
+    /// The second mode's share of the upper link's static answer ([`modes`]).
     #[serde(default)]
     pub mode_share: f64,
 }
@@ -318,7 +318,7 @@ fn links(coef: &Coefficients, max_mass_ratio: f64) -> Option<(f64, f64, f64)> {
 /// mode's share of the upper link's static answer to the vehicle's acceleration, |r₂/x₂| /
 /// |r₁/x₁|, where θ₁/a = r₁/(s² − x₁) + r₂/(s² − x₂) and x = −ω² (the two parts add up to the
 /// static −1/g).
-pub fn mode_share(l1: f64, l2: f64, mu: f64) -> (f64, f64, f64) {
+pub fn modes(l1: f64, l2: f64, mu: f64) -> (f64, f64, f64) {
     let [alpha, _, beta, _, gamma, _] = from_links(l1, l2, mu);
     // α x² + β x + 1 = 0 in x = s²: two negative roots for any physical links.
     let disc = (beta * beta - 4.0 * alpha).max(0.0).sqrt();
@@ -458,7 +458,7 @@ pub fn fit(v: &[f64], theta: &[f64], dt: f64, settings: &LinkSettings) -> Option
     }
     let double = best.and_then(|(err, (length, length2, mass_ratio))| {
         let error_ratio = err / single_error;
-        let (_, second_mode, share) = mode_share(length, length2, mass_ratio);
+        let (_, second_mode, share) = modes(length, length2, mass_ratio);
         let seen = second_mode < settings.max_second_mode * settings.filter_rate
             && share >= settings.min_mode_share;
         (seen && error_ratio <= 1.0 - settings.min_improvement).then_some(DoublePendulum {
@@ -486,7 +486,7 @@ mod tests {
         // Equal links l: ω² = (g/l)(1 + μ ± √(μ(1 + μ))).
         let l = 0.7;
         for mu in [0.05, 0.3, 1.0, 4.0] {
-            let (w1, w2, share) = mode_share(l, l, mu);
+            let (w1, w2, share) = modes(l, l, mu);
             let root = (mu * (1.0 + mu)).sqrt();
             let want1 = (GRAVITY / l * (1.0 + mu - root)).sqrt();
             let want2 = (GRAVITY / l * (1.0 + mu + root)).sqrt();
@@ -499,7 +499,7 @@ mod tests {
         // A vanishing lower mass leaves the second mode nothing of the static answer.
         let shares: Vec<f64> = [0.3, 0.03, 0.003]
             .iter()
-            .map(|&mu| mode_share(1.0, 0.5, mu).2)
+            .map(|&mu| modes(1.0, 0.5, mu).2)
             .collect();
         assert!(
             shares[0] > shares[1] && shares[1] > shares[2] && shares[2] < 5e-3,
