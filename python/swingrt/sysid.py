@@ -551,7 +551,9 @@ def select_for_control(
     ``wander_sigmas`` (3.29: the noise alone ends one flight in a thousand past it), else the
     one that wanders least; a model flown with a raised noise carries it
     (``diagnostics['swing_measurement_noise']``) and every MPC built on it assumes at
-    least that. ``control_check['wander']`` reports the pick's predicted wander on each
+    least that. When none passes so designed, every candidate is flown once more with the
+    largest factor (``control_check['strongest_filter_pass']``) and the pick is taken from
+    both passes. ``control_check['wander']`` reports the pick's predicted wander on each
     checked loop. Without a white-box (a model-only check) the twin is not flown. A flight
     identified on the IMU's swing estimate (:func:`swing_source`) flies the twin on the
     same estimate (its ``sensors`` set to the flight's swing source and

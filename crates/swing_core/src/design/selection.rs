@@ -23,8 +23,12 @@
 //! PX4's own on the same step. Of the first `passers` candidates that pass (looking at most
 //! `look_ahead` candidates past the first), the one that swings least on the twin is taken
 //! (one scalar cost; ties go to the lower NMAE, so without a twin the first that passes).
-//! When none passes, the settled candidate that swings least is taken rather than the first
-//! that settled. Candidates are flown a batch at a time, one per core, and taken in order,
+//! When none passes and the flight's swing noise is known, the candidates are flown once
+//! more with the noise design's strongest filter (the largest of `noise_factors`): the
+//! design's choice is a prediction of the wander, and a filter that trusts a noisy swing
+//! can leave the twin's step short of its final bound where the prediction saw no wander.
+//! When still none passes, the settled candidate that swings least (of both passes) is taken
+//! rather than the first that settled. Candidates are flown a batch at a time, one per core, and taken in order,
 //! so the choice is the one-by-one loop's on any number of cores.
 //!
 //! The decision is pure and separate from the flying: [`judge`] rules on one candidate's
@@ -289,7 +293,9 @@ pub struct SelectionSettings {
     /// white-box plant behind the largest of the check's lags) is within the target (see
     /// `wander_sigmas`), else with the one of least predicted wander. The chosen model
     /// carries a raised noise (`Diagnostics::swing_measurement_noise`), and every MPC built on it
-    /// assumes at least that. `[1]`: the noise as set.
+    /// assumes at least that. When no candidate passes so designed, every candidate not yet
+    /// flown with the largest factor is flown again with it (`control_check.
+    /// strongest_filter_pass` in the diagnostics). `[1]`: the noise as set, no second pass.
     pub noise_factors: Vec<f64>,
     /// How many standard deviations of the predicted wander must fit within the final-error
     /// bound a flight is judged by (`TwinBounds::late_error`, 1 % of the step): 3.29, the
@@ -848,7 +854,9 @@ pub fn select_for_control(
         .filter(|s| *s > 0.0);
     let design_lag = lags.iter().copied().fold(0.0_f64, f64::max);
     let target = settings.twin_bounds.late_error / settings.wander_sigmas;
-    let design_noise = |model: LinearModel| -> Result<(LinearModel, MpcController), ControlError> {
+    let design_noise = |model: LinearModel,
+                        factors: &[f64]|
+     -> Result<(LinearModel, MpcController), ControlError> {
         let mpc = MpcController::new(&model, mpc_settings.clone())?;
         let Some(swing) = swing_noise else {
             return Ok((model, mpc));
@@ -862,7 +870,7 @@ pub fn select_for_control(
         // Each factor's design and wander, in order until one is within the target; later
         // factors may be designed ahead on an idle core.
         let tried = crate::parallel::until(
-            &settings.noise_factors,
+            factors,
             |&factor| -> Result<(f64, MpcController), ControlError> {
                 let designed = if factor > 1.0 {
                     mpc.with_swing_measurement_noise(base * factor)?
@@ -882,7 +890,7 @@ pub fn select_for_control(
             |tried| tried.as_ref().map_or(true, |(w, _)| *w <= target),
         );
         let mut best: Option<(f64, f64, MpcController)> = None;
-        for (&factor, tried) in settings.noise_factors.iter().zip(tried) {
+        for (&factor, tried) in factors.iter().zip(tried) {
             let (w, designed) = tried?;
             let within = w <= target;
             if best.as_ref().is_none_or(|(b, _, _)| w < *b) || within {
@@ -900,7 +908,7 @@ pub fn select_for_control(
     };
     // One row of the table: refitted, screened when the search did not, its estimator's
     // swing noise designed, flown. `None`: screened out.
-    let fly_row = |row: &&Candidate| -> Result<Option<Flown>, ControlError> {
+    let fly_row = |row: &Candidate, factors: &[f64]| -> Result<Option<Flown>, ControlError> {
         let model = refit(row.delays, row.rank)?;
         let mut screen_verdict = None;
         if row.stable.is_none() {
@@ -912,7 +920,7 @@ pub fn select_for_control(
                 screen_verdict = Some(verdict);
             }
         }
-        let (model, mpc) = design_noise(model)?;
+        let (model, mpc) = design_noise(model, factors)?;
         let (figures, verdict) = evaluate(&model, mpc)?;
         let candidate = CheckedCandidate {
             delays: row.delays,
@@ -934,30 +942,69 @@ pub fn select_for_control(
     let batch = crate::parallel::threads_for(2);
     // The candidates that passed, by their index in `checked`, as flown.
     let mut passers: Vec<(usize, LinearModel)> = Vec::new();
-    'rows: for chunk in rows.chunks(batch) {
-        let outcomes = crate::parallel::map(chunk.iter().collect(), fly_row);
-        for (row, outcome) in chunk.iter().zip(outcomes) {
-            let beyond_look_ahead = passers
-                .first()
-                .is_some_and(|(first, _)| checked.len() - first > settings.look_ahead);
-            if checked.len() >= settings.candidates || beyond_look_ahead {
-                break 'rows;
-            }
-            let Some(flown) = outcome? else {
-                screened_out += 1;
-                continue;
-            };
-            if let Some(v) = flown.screen_verdict {
-                verdicts.insert((row.delays, row.rank), v);
-            }
-            let passed = flown.candidate.passed();
-            checked.push(flown.candidate);
-            if passed {
-                passers.push((checked.len() - 1, flown.model));
-                if passers.len() >= settings.passers {
+    // The noise design's strongest filter, flown as a second pass when no candidate passed
+    // as the design predicted (`SelectionSettings::noise_factors`).
+    let strongest = settings
+        .noise_factors
+        .iter()
+        .copied()
+        .fold(1.0_f64, f64::max);
+    let strongest_noise = mpc_settings.swing_measurement_noise() * strongest;
+    let mut second_pass: Option<(f64, usize)> = None;
+    for pass in 0..2 {
+        let factors = if pass == 0 {
+            settings.noise_factors.clone()
+        } else if passers.is_empty() && swing_noise.is_some() && strongest > 1.0 {
+            vec![strongest]
+        } else {
+            break;
+        };
+        // A row the design already flew with the strongest filter is not flown again.
+        let flown_strongest: std::collections::HashSet<(usize, usize)> = checked
+            .iter()
+            .filter(|c| {
+                c.swing_measurement_noise
+                    .is_some_and(|n| (n - strongest_noise).abs() <= 1e-12 * n)
+            })
+            .map(|c| (c.delays, c.rank))
+            .collect();
+        let pass_rows: Vec<&Candidate> = rows
+            .iter()
+            .copied()
+            .filter(|r| pass == 0 || !flown_strongest.contains(&(r.delays, r.rank)))
+            .collect();
+        let start = checked.len();
+        'rows: for chunk in pass_rows.chunks(batch) {
+            let outcomes =
+                crate::parallel::map(chunk.to_vec(), |row: &Candidate| fly_row(row, &factors));
+            for (row, outcome) in chunk.iter().zip(outcomes) {
+                let beyond_look_ahead = passers
+                    .first()
+                    .is_some_and(|(first, _)| checked.len() - first > settings.look_ahead);
+                if checked.len() - start >= settings.candidates || beyond_look_ahead {
                     break 'rows;
                 }
+                let Some(flown) = outcome? else {
+                    if pass == 0 {
+                        screened_out += 1;
+                    }
+                    continue;
+                };
+                if let Some(v) = flown.screen_verdict {
+                    verdicts.insert((row.delays, row.rank), v);
+                }
+                let passed = flown.candidate.passed();
+                checked.push(flown.candidate);
+                if passed {
+                    passers.push((checked.len() - 1, flown.model));
+                    if passers.len() >= settings.passers {
+                        break 'rows;
+                    }
+                }
             }
+        }
+        if pass == 1 {
+            second_pass = Some((strongest_noise, checked.len() - start));
         }
     }
     let (pick_index, pick) = choose(&checked, settings)
@@ -1011,6 +1058,10 @@ pub fn select_for_control(
             "look_ahead": settings.look_ahead,
             "pick": pick.to_string(),
             "screened_out": screened_out,
+            "strongest_filter_pass": second_pass.map(|(noise, flown)| json!({
+                "swing_measurement_noise": noise,
+                "flown": flown,
+            })),
             "wander": wander,
             "checked": checked.iter().map(checked_json).collect::<Vec<_>>(),
         }),
