@@ -20,6 +20,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from swingrt._core import Scenario
 from swingrt.campaign import failure_reason, fly_sample, load_spec, parse_spec, read_rows
 from swingrt.campaign.report import wilson, worst_samples
 from swingrt.campaign.sampling import draw, parse_distribution
@@ -251,12 +252,16 @@ def test_a_white_box_that_fails_does_not_stop_the_data_driven_model():
 @pytest.mark.parametrize("twin", ["off", "builtin"])
 def test_a_study_says_which_twin_its_selection_flies(tmp_path, twin):
     """``[identify] twin``: ``off`` flies none, ``builtin`` the built-in vehicle at the mass
-    the study describes (a twin that is not the 0.7x vehicle flown: its motors, inertia,
-    drag and gains are the built-in's), and the selection's diagnostics say which; the study's
-    ``[selection]`` settings reach the selection (here a dead time at the acceleration input
-    and one lag, where the defaults have no dead time and two lags)."""
+    the study describes, under the PX4 gains of its training flight (a twin that is not the
+    0.7x vehicle flown: its motors, inertia and drag are the built-in's), and the
+    selection's diagnostics say which; the study's ``[selection]`` settings reach the
+    selection (here a dead time at the acceleration input and one lag, where the defaults
+    have no dead time and two lags)."""
     selection = {"input_delays": [0.12], "input_lags": [0.05]} if twin == "builtin" else None
-    rows, _ = fly_sample(_vehicle({"twin": twin}, selection=selection), 0, out=tmp_path)
+    spec = _vehicle({"twin": twin}, selection=selection)
+    att_p = [6.0, 5.8, 2.8]
+    spec["vary"]["controller.att_p"] = {"dist": "fixed", "value": att_p}
+    rows, _ = fly_sample(spec, 0, out=tmp_path)
     by = {r["controller"]: r for r in rows}
     assert by["mpc"]["error"] == "", by["mpc"]["error"]
     cc = json.loads((tmp_path / "model.json").read_text())["diagnostics"]["control_check"]
@@ -266,6 +271,10 @@ def test_a_study_says_which_twin_its_selection_flies(tmp_path, twin):
     else:
         assert f"{0.7 * 0.952:.3f} kg vehicle" in cc["twin"]["plant"], cc["twin"]["plant"]
         assert cc["input_delays"] == [0.12] and cc["input_lags"] == [0.05], cc
+        flown = json.loads((tmp_path / "model.json").read_text())["diagnostics"]["twin"]
+        builtin = Scenario.builtin("step").to_dict()
+        assert flown["scenario"]["controller"]["att_p"] == pytest.approx(att_p)
+        assert flown["scenario"]["vehicle"]["motor_tau"] == builtin["vehicle"]["motor_tau"]
 
 
 def test_an_unknown_selection_setting_is_refused_by_name(tmp_path):

@@ -659,18 +659,31 @@ def test_select_for_control_bounds():
     )
 
 
-def _campaign_sample(index: int, campaign: str = "robustness"):
-    """Sample ``index`` of the robustness campaign (or of ``examples/campaigns/<campaign>
-    .toml``): its training flight, the training scenario (the vehicle's twin) and the
-    evaluation scenario."""
+def _campaign_spec(campaign: str, seed: int | None):
+    """The spec of ``examples/campaigns/<campaign>.toml``, at ``seed`` when given."""
     import tomllib
 
     from swingrt.campaign.spec import parse_spec
+
+    root = Path(__file__).resolve().parents[1]
+    raw = tomllib.loads((root / f"examples/campaigns/{campaign}.toml").read_text())
+    return parse_spec(raw if seed is None else {**raw, "seed": seed})
+
+
+def _campaign_experiment(index: int, campaign: str = "robustness", seed: int | None = None):
+    """The experiment of sample ``index`` of a campaign (see :func:`_campaign_sample`)."""
+    spec = _campaign_spec(campaign, seed)
+    return spec.experiment(spec.draw(index), label=str(index))
+
+
+def _campaign_sample(index: int, campaign: str = "robustness", seed: int | None = None):
+    """Sample ``index`` of the robustness campaign (or of ``examples/campaigns/<campaign>
+    .toml``, at ``seed`` when given): its training flight, the training scenario (the
+    vehicle's twin) and the evaluation scenario."""
     from swingrt.experiments import evaluation_scenario, training_scenario
     from swingrt.sim import _run
 
-    root = Path(__file__).resolve().parents[1]
-    spec = parse_spec(tomllib.loads((root / f"examples/campaigns/{campaign}.toml").read_text()))
+    spec = _campaign_spec(campaign, seed)
     exp = spec.experiment(spec.draw(index), label=str(index))
     seed = spec.flight_seed(index)
     train_sc = training_scenario(exp, {}, seed)
@@ -970,6 +983,67 @@ def test_the_builtin_twin_weighs_the_vehicle_and_hovers_as_the_builtin_does(mass
     p = twin.to_dict()["payload"]["mass"] * k
     scaled = twin.with_overrides({"payload": {"mass": p}})
     assert scaled.hover_thrust() == pytest.approx(base.hover_thrust(), rel=1e-9)
+
+
+def test_the_builtin_twin_flies_the_px4_gains_it_is_given_and_refuses_other_fields():
+    """Given PX4's gains (a ULog's parameters give them), the built-in twin flies them; every
+    other controller field and the airframe stay the built-in's."""
+    base = _core.Scenario.builtin("step").to_dict()
+    gains = {"att_p": [7.5, 7.1, 2.8], "rate_p": [0.13, 0.12, 0.2], "vel_p": [1.5, 1.5, 4.0]}
+    twin = sysid.builtin_twin(base["vehicle"]["mass"], gains).to_dict()
+    for k, v in twin["controller"].items():
+        expected = gains.get(k, base["controller"][k])
+        assert v == pytest.approx(expected), k
+    assert twin["vehicle"] == base["vehicle"]
+    with pytest.raises(ConfigError, match="gains: tilt_max"):
+        sysid.builtin_twin(0.952, {"tilt_max": 0.5})
+    with pytest.raises(ConfigError, match="gains"):
+        sysid.builtin_twin(0.952, {"att_p": [7.0]})
+
+
+def test_the_gains_of_a_ulog_s_parameters_are_px4_s_with_one_horizontal_velocity_gain(tmp_path):
+    """`swingrt identify LOG.ulg` flies the built-in twin under the log's gains: PX4's
+    pitch P is the attitude loop's N-axis gain, its one horizontal velocity gain goes to
+    North and East, and what the log lacks is nominal."""
+    from swingrt.commands.identify import _logged_gains
+
+    f = tmp_path / "params.txt"
+    f.write_text("MC_PITCH_P 7.5\nMPC_XY_VEL_P_ACC 2.1\nMC_ROLLRATE_D 0.004\n")
+    gains = _logged_gains(f)
+    nominal = _core.Scenario.builtin("step").to_dict()["controller"]
+    assert set(gains) == set(sysid.PX4_GAINS)
+    assert gains["att_p"] == pytest.approx([nominal["att_p"][0], 7.5, nominal["att_p"][2]])
+    assert gains["vel_p"] == pytest.approx([2.1, 2.1, nominal["vel_p"][2]])
+    assert gains["rate_d"][0] == pytest.approx(0.004)
+    assert gains["rate_i"] == pytest.approx(nominal["rate_i"])
+
+
+def test_a_builtin_twin_under_the_vehicle_s_gains_refuses_a_loop_its_attitude_loop_excites():
+    """Sample 497 of the vehicle-varied robustness campaign, seed 10 (a double pendulum,
+    0.11 kg on 0.66 m with 0.10 kg 0.50 m below, under PX4 pitch gains of 5.3 and 0.12 where
+    the built-in flies 6.5 and 0.15): the links are found and the twin carries them, yet
+    under the built-in's gains the pick's loop, through the vehicle's softer attitude loop,
+    grows an oscillation near the second mode and the velocity never settles. The campaign's
+    built-in twin flies the training flight's PX4 gains (inertia, motors and drag stay the
+    built-in's: a twin that is not the plant); its pick settles and damps the swing."""
+    from swingrt.experiments.identification import case_twin
+
+    train, train_sc, ev = _campaign_sample(497, "robustness-vehicle", seed=10)
+    exp_twin = case_twin(_campaign_experiment(497, "robustness-vehicle", seed=10), train_sc)
+    d, sample = exp_twin.to_dict(), train_sc.to_dict()
+    for k in sysid.PX4_GAINS:
+        assert d["controller"][k] == pytest.approx(sample["controller"][k]), k
+    assert d["vehicle"]["mass"] == pytest.approx(sample["vehicle"]["mass"])
+    assert d["vehicle"]["inertia"] != pytest.approx(sample["vehicle"]["inertia"])
+    assert d["vehicle"]["motor_tau"] != pytest.approx(sample["vehicle"]["motor_tau"])
+    mass = sample["vehicle"]["mass"]
+    result = sysid.search(train, vehicle_mass=mass)
+    nominal = sysid.select_for_control(train, result, twin=sysid.builtin_twin(mass))
+    gains = sysid.select_for_control(train, result, twin=exp_twin)
+    pid = _fly(ev, controller="pid")["swing_excess_iae_deg_s"]
+    before, after = _fly(ev, nominal.model), _fly(ev, gains.model)
+    assert math.isinf(before["v_settle_s"]) and before["swing_excess_iae_deg_s"] > pid
+    assert after["v_settle_s"] < 6.0 and after["swing_excess_iae_deg_s"] < 0.2 * pid, after
 
 
 @pytest.mark.parametrize("mass", [0.0, -1.0, math.nan, math.inf, 0.05])

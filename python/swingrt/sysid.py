@@ -58,6 +58,7 @@ __all__ = [
     "resample",
     "search",
     "builtin_twin",
+    "PX4_GAINS",
     "check_plant",
     "select_for_control",
     "sweep_noise",
@@ -75,7 +76,8 @@ PLAN_KEYS = ("search", "twin")
 
 #: What flies as the vehicle's twin in a study's control-relevant selection: ``"exact"`` the
 #: training flight's own vehicle (its airframe and PX4 gains), ``"builtin"`` the built-in
-#: vehicle whatever the study flies (a twin that is not the plant), ``"off"`` no twin.
+#: vehicle weighed at the flight's vehicle mass and flown under its PX4 gains (what a log
+#: gives; its airframe is not the plant's), ``"off"`` no twin.
 TWINS = ("exact", "builtin", "off")
 
 #: State and input columns per axis choice.
@@ -616,15 +618,34 @@ def select_for_control(
     return SearchResult(model=model, table=result.table, search=result.search, settings=s)
 
 
-def builtin_twin(vehicle_mass: float) -> _core.Scenario:
+#: The fields of a scenario's ``controller`` table that are PX4's cascade gains (velocity,
+#: attitude and rate loops): what every ULog's parameters give of a vehicle.
+PX4_GAINS = ("vel_p", "vel_i", "vel_d", "att_p", "rate_p", "rate_i", "rate_d")
+
+
+def builtin_twin(vehicle_mass: float, gains: Mapping[str, Any] | None = None) -> _core.Scenario:
     """The built-in vehicle as the twin of one that weighs ``vehicle_mass`` [kg] (the
-    identification's: given, described or the default): the mass ratio of vehicle and
-    payload sets how hard the swing pulls on the vehicle, so the twin weighs what is known.
-    What is not known stays the built-in Honeybee's: its motors are scaled with the mass (the
-    same hover thrust and thrust-to-weight, as :func:`swingrt.hil.params.vehicle_from_px4`
-    scales them to a given mass) and so is its inertia; drag, motor lag and PX4's gains
-    are nominal."""
+    identification's: given, described or the default), flown under PX4's ``gains`` when
+    given (fields of :data:`PX4_GAINS`, as a scenario's ``controller`` table holds them; a
+    ULog's parameters give them). The mass ratio of vehicle and payload sets how hard the
+    swing pulls on the vehicle, and the gains shape the attitude loop the MPC commands
+    through, so the twin takes what is known. What is not known stays the built-in
+    Honeybee's: its motors are scaled with the mass (the same hover thrust and
+    thrust-to-weight, as :func:`swingrt.hil.params.vehicle_from_px4` scales them to a given
+    mass) and so is its inertia; drag and motor lag are nominal, and so are the gains not
+    given."""
     twin = _core.Scenario.builtin("step")
+    if gains:
+        unknown = sorted(set(gains) - set(PX4_GAINS))
+        if unknown:
+            raise ConfigError(
+                f"gains: {', '.join(unknown)} not PX4 cascade gains ({', '.join(PX4_GAINS)})",
+                field="gains",
+            )
+        try:
+            twin = twin.with_overrides({"controller": {k: list(v) for k, v in gains.items()}})
+        except (ConfigError, TypeError) as e:
+            raise ConfigError(f"gains: the built-in twin refuses them ({e})", field="gains") from e
     vehicle = twin.to_dict()["vehicle"]
     scale = float(vehicle_mass) / float(vehicle["mass"])
     if scale == 1.0:

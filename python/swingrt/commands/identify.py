@@ -90,8 +90,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
         help="with --select control: also fly each candidate's MPC on swingrt's simulator of "
         "this vehicle (a scenario TOML: airframe and PX4 gains, e.g. from swingrt vehicle) "
         "carrying the white-box payload, and take only models that settle there; default "
-        "'builtin', the built-in vehicle at --vehicle-mass (what a twin adds is PX4's "
-        "cascade and its lag more than the exact airframe); 'none' flies no twin",
+        "'builtin', the built-in vehicle at --vehicle-mass, under the PX4 gains a ULog's "
+        "parameters give (what a twin adds is PX4's cascade and its lag more than the "
+        "exact airframe); 'none' flies no twin",
     )
     p.add_argument(
         "--sweep",
@@ -137,6 +138,9 @@ def run(args) -> int:
     twin = {"none": None, "builtin": "builtin"}.get(args.twin, described)
     with options_named():
         checked = sysid.identify_settings(**settings)
+    if twin == "builtin" and str(args.data).endswith(".ulg"):
+        # A ULog names the PX4 gains the vehicle flew with: the twin flies them too.
+        twin = sysid.builtin_twin(checked["vehicle_mass"], _logged_gains(args.data))
     ulog_swing = _ulog_swing(args)
     body = None
     if described is not None and str(args.data).endswith(".ulg"):
@@ -183,6 +187,18 @@ def run(args) -> int:
         _sweep(args, data, checked)
     print(f"wrote {args.output}")
     return 0
+
+
+def _logged_gains(path) -> dict:
+    """PX4's cascade gains in the ULog at ``path`` (:data:`swingrt.sysid.PX4_GAINS`; the
+    built-in vehicle's where the log has no such parameter)."""
+    from swingrt import _core, sysid
+    from swingrt.hil.params import controller_from_px4
+    from swingrt.io.px4_params import read_px4_parameters
+
+    nominal = _core.Scenario.builtin("step").to_dict()["controller"]
+    controller, _ = controller_from_px4(read_px4_parameters(path), nominal)
+    return {k: controller[k] for k in sysid.PX4_GAINS}
 
 
 def _ulog_swing(args) -> dict | None:

@@ -87,12 +87,24 @@ def case_twin(exp: Experiment, vehicle: Scenario | None) -> Scenario | str | Non
     """The twin the selection of ``exp`` flies, as ``[identify] twin`` says
     (:data:`swingrt.sysid.TWINS`; default ``"exact"``): the training flight's own
     ``vehicle``, the built-in one (``"builtin"``: a twin that is not the plant, as a user
-    without a description of the vehicle has) or none."""
+    without a description of the vehicle has: weighed at the identification's vehicle mass
+    and flown under the training flight's PX4 gains, which its log's parameters give) or
+    none."""
+    from swingrt.sysid import PX4_GAINS, builtin_twin, identify_settings
+
     choice = exp.identify.get("twin", "exact")
     if choice == "off":
         return None
     if choice == "builtin":
-        return "builtin"
+        if vehicle is None:
+            return "builtin"
+        described = _vehicle_mass(vehicle)
+        given = exp.identify.get("vehicle_mass")
+        mass = given if given is not None else described
+        if mass is None:
+            mass = identify_settings()["vehicle_mass"]
+        controller = vehicle.to_dict()["controller"]
+        return builtin_twin(mass, {k: controller[k] for k in PX4_GAINS})
     return vehicle
 
 

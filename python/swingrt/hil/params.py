@@ -12,6 +12,8 @@ data: the swing sensor's DEBUG_VECT is logged, and the loss of a ground station 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from typing import Any
 
 from swingrt._core import Scenario
 from swingrt.errors import ConfigError
@@ -159,6 +161,30 @@ PX4_CONTROLLER: dict[str, tuple[str, int | None, float]] = {
 _X_TOLERANCE = 0.05
 
 
+def controller_from_px4(
+    params: Mapping[str, float], controller: Mapping[str, Any]
+) -> tuple[dict[str, Any], list[str]]:
+    """``controller`` (a scenario's ``controller`` table) with what PX4's ``params`` set of
+    it (:data:`PX4_CONTROLLER`; PX4's one horizontal velocity and position gain goes to North
+    and East alike), and the names read."""
+    controller = dict(controller)
+    read = []
+    for name, (field, index, factor) in PX4_CONTROLLER.items():
+        if name not in params:
+            continue
+        value = float(params[name]) * factor
+        if index is None:
+            controller[field] = value
+        else:
+            controller[field] = list(controller[field])
+            controller[field][index] = value
+            if field.startswith("vel") or field == "pos_p":
+                if index == 0:  # PX4 has one horizontal gain: North and East alike
+                    controller[field][1] = value
+        read.append(name)
+    return controller, read
+
+
 def vehicle_from_px4(
     params: dict[str, float],
     *,
@@ -189,20 +215,7 @@ def vehicle_from_px4(
     arm = math.hypot(*rotor_xy)
     vehicle["arm"], vehicle["yaw_arm"] = arm, yaw_arm
     vehicle["rotor_xy"] = list(rotor_xy)
-    read = []
-    for name, (field, index, factor) in PX4_CONTROLLER.items():
-        if name not in params:
-            continue
-        value = float(params[name]) * factor
-        if index is None:
-            controller[field] = value
-        else:
-            controller[field] = list(controller[field])
-            controller[field][index] = value
-            if field.startswith("vel") or field == "pos_p":
-                if index == 0:  # PX4 has one horizontal gain: North and East alike
-                    controller[field][1] = value
-        read.append(name)
+    controller, read = controller_from_px4(params, controller)
     missing = sorted(set(PX4_CONTROLLER) - set(read))
     if missing:
         notes.append(f"not in the parameters, nominal: {', '.join(missing)}")
