@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from swingrt.commands._common import options_named
-from swingrt.errors import ConfigError
+from swingrt.errors import ConfigError, DataError
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
@@ -189,15 +189,20 @@ def run(args) -> int:
     return 0
 
 
-def _logged_gains(path) -> dict:
+def _logged_gains(path) -> dict | None:
     """PX4's cascade gains in the ULog at ``path`` (:data:`swingrt.sysid.PX4_GAINS`; the
-    built-in vehicle's where the log has no such parameter)."""
+    built-in vehicle's where the log has no such parameter); ``None`` when the log holds no
+    parameters at all (a log not written by PX4), whose reading fails later if it is no log."""
     from swingrt import _core, sysid
     from swingrt.hil.params import controller_from_px4
     from swingrt.io.px4_params import read_px4_parameters
 
+    try:
+        params = read_px4_parameters(path)
+    except DataError:
+        return None
     nominal = _core.Scenario.builtin("step").to_dict()["controller"]
-    controller, _ = controller_from_px4(read_px4_parameters(path), nominal)
+    controller, _ = controller_from_px4(params, nominal)
     return {k: controller[k] for k in sysid.PX4_GAINS}
 
 
