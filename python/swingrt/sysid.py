@@ -504,6 +504,7 @@ def select_for_control(
     twin: _core.Scenario | str | None = "builtin",
     twin_bounds: Mapping[str, float] | None = None,
     noise_factors: Sequence[float] | None = None,
+    disturbance_factors: Sequence[float] | None = None,
     wander_sigmas: float | None = None,
     check: tuple[LinearModel, str] | None = None,
     **settings: Any,
@@ -555,10 +556,17 @@ def select_for_control(
     (``diagnostics['swing_measurement_noise']``) and every MPC built on it assumes at
     least that. When none passes so designed, every candidate is flown once more with the
     largest factor (``control_check['strongest_filter_pass']``) and the pick is taken from
-    both passes. ``control_check['wander']`` reports the pick's predicted wander on each
-    checked loop. Without a white-box (a model-only check) the twin is not flown. A flight
-    identified on the IMU's swing estimate (:func:`swing_source`) flies the twin on the
-    same estimate (its ``sensors`` set to the flight's swing source and
+    both passes. A pick that passed on the twin then has its disturbance estimate's rate
+    designed there: it flies the twin's gust flight (the step held, a 1 m/s headwind gust
+    for 2 s, no sensor noise) as designed and with its disturbances' Kalman process noise
+    raised by each of ``disturbance_factors`` above 1 (default 1, 2.5); a raised design
+    that passes every flight again and is back within the settle band within the twin's
+    ``settle`` after the gust is taken when the gust leaves less swing, and the model
+    carries it (``diagnostics['disturbance_noise']``; ``control_check
+    ['disturbance_design']``). ``control_check['wander']`` reports the pick's predicted
+    wander on each checked loop. Without a white-box (a model-only check) the twin is not
+    flown. A flight identified on the IMU's swing estimate (:func:`swing_source`) flies the
+    twin on the same estimate (its ``sensors`` set to the flight's swing source and
     estimator). ``check`` is :func:`check_plant`'s answer when the caller already has it
     (it is built from the same flight and settings otherwise)."""
     if result.search is None:
@@ -579,6 +587,7 @@ def select_for_control(
         "bounds": None if bounds is None else dict(bounds),
         "twin_bounds": None if twin_bounds is None else dict(twin_bounds),
         "noise_factors": None if noise_factors is None else list(noise_factors),
+        "disturbance_factors": None if disturbance_factors is None else list(disturbance_factors),
         "wander_sigmas": wander_sigmas,
     }
     selection = {k: v for k, v in given.items() if v is not None} | {"plant_label": label}

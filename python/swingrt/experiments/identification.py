@@ -33,9 +33,9 @@ def identify_case(
     from swingrt.reports import plot_pareto
     from swingrt.sysid import identify, lqr_parameters, search, select_for_control
 
-    described = _vehicle_mass(vehicle)
-    mass = {} if described is None else {"vehicle_mass": described}
-    opts = {"method": "dmdc", **mass, **exp.identify}
+    known = _case_vehicle_mass(exp, vehicle)
+    mass = {} if known is None else {"vehicle_mass": known}
+    opts = {"method": "dmdc", **exp.identify, **mass}
     opts.pop("twin", None)
     if opts.pop("search", True) and "delays" not in opts:
         result = search(train, axes=exp.axes, **opts)
@@ -98,9 +98,7 @@ def case_twin(exp: Experiment, vehicle: Scenario | None) -> Scenario | str | Non
     if choice == "builtin":
         if vehicle is None:
             return "builtin"
-        described = _vehicle_mass(vehicle)
-        given = exp.identify.get("vehicle_mass")
-        mass = given if given is not None else described
+        mass = _case_vehicle_mass(exp, vehicle)
         if mass is None:
             mass = identify_settings()["vehicle_mass"]
         controller = vehicle.to_dict()["controller"]
@@ -112,11 +110,16 @@ def case_twin(exp: Experiment, vehicle: Scenario | None) -> Scenario | str | Non
 _WHITEBOX_KEYS = ("vehicle_mass", "payload_mass", "cable_length")
 
 
-def _vehicle_mass(sc: Scenario | None) -> float | None:
-    """The vehicle mass [kg] a scenario describes, if any."""
-    if sc is None:
+def _case_vehicle_mass(exp: Experiment, vehicle: Scenario | None) -> float | None:
+    """The vehicle mass [kg] the identification of ``exp`` knows: ``[identify]
+    vehicle_mass`` if given, else the mass ``vehicle`` describes, else none (the
+    identification's default then)."""
+    given = exp.identify.get("vehicle_mass")
+    if given is not None:
+        return float(given)
+    if vehicle is None:
         return None
-    mass = sc.to_dict().get("vehicle", {}).get("mass")
+    mass = vehicle.to_dict().get("vehicle", {}).get("mass")
     return None if mass is None else float(mass)
 
 

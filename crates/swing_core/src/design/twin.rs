@@ -27,6 +27,19 @@ pub const WANDER_FROM: f64 = 10.0;
 /// steady-state error is the mean over its last 2 s.
 pub const WANDER_SPAN: f64 = 2.0;
 
+/// Peak of the gust of the twin's gust flight [m/s], against the step on every flown axis
+/// (a headwind): the size of the gusts the robustness studies fly (up to 1.5 m/s per
+/// axis), at which a slow disturbance estimate overshoots.
+pub const TWIN_GUST: f64 = 1.0;
+/// Start of the gust of the twin's gust flight [s]: the step has settled by then.
+pub const TWIN_GUST_AT: f64 = 10.0;
+/// Length of the gust of the twin's gust flight [s].
+pub const TWIN_GUST_DURATION: f64 = 2.0;
+/// Length of the twin's gust flight [s]: the settle bound's time after the gust, and more.
+pub const TWIN_GUST_SECONDS: f64 = 24.0;
+/// Span before the gust over which the swing it is measured against is taken [s].
+const GUST_REFERENCE_SPAN: f64 = 2.0;
+
 /// The twin as a plant of the control-relevant selection: a candidate's MPC flies a
 /// velocity step (hover, step at [`TWIN_CHECK_STEP_AT`], hold) on swingrt's nonlinear
 /// simulator of the vehicle under PX4's cascade, carrying the payload of the flight's
@@ -77,6 +90,29 @@ pub struct TwinHold {
     /// of the step: in still air a settled MPC stays on the setpoint, and one whose loop
     /// slowly grows an oscillation (too slowly for the step flight to show) does not.
     pub late_error: f64,
+}
+
+/// Figures of the twin's gust flight ([`TwinPlant::gust`]): the step held, in still air
+/// but for one headwind gust of [`TWIN_GUST`] from [`TWIN_GUST_AT`] for
+/// [`TWIN_GUST_DURATION`], without sensor noise.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TwinGust {
+    /// ∫ |swing − swing before the gust| dt from the gust's start to the flight's end,
+    /// summed over the axes [deg·s]: the swing the gust leaves.
+    pub swing_iae: f64,
+    /// Time after the gust's end from which every axis' velocity stays within
+    /// [`SETTLE_BAND`] of the setpoint [s] (∞: it never does).
+    pub resettle: f64,
+}
+
+impl TwinGust {
+    /// The figures of a gust flight that diverged or was handed back to PX4.
+    pub fn diverged() -> Self {
+        Self {
+            swing_iae: f64::INFINITY,
+            resettle: f64::INFINITY,
+        }
+    }
 }
 
 impl TwinHold {
@@ -325,6 +361,59 @@ impl TwinPlant {
         }
         if !(out.wander.is_finite() && out.late_error.is_finite()) {
             return Ok(TwinHold::diverged());
+        }
+        Ok(out)
+    }
+
+    /// Fly the controller `mpc` (not flown before) on the step held to
+    /// [`TWIN_GUST_SECONDS`], with a headwind gust of [`TWIN_GUST`] on every flown axis from
+    /// [`TWIN_GUST_AT`] and no sensor noise: how much swing the gust leaves and how soon the
+    /// velocity is back on the setpoint ([`TwinGust`]).
+    pub fn gust(&self, mpc: MpcController) -> Result<TwinGust, ControlError> {
+        let mut sc = self.scenario.clone();
+        sc.name = "twin gust check".into();
+        sc.duration = TWIN_GUST_SECONDS;
+        sc.noise.swing_std = 0.0;
+        let against = -TWIN_GUST * self.step.signum();
+        sc.wind.gusts = vec![crate::plant::wind::Gust {
+            t: TWIN_GUST_AT,
+            duration: TWIN_GUST_DURATION,
+            amplitude: [against, if self.axes == 2 { against } else { 0.0 }, 0.0],
+        }];
+        let Some(sim) = self.finish(self.start(sc, mpc)?)? else {
+            return Ok(TwinGust::diverged());
+        };
+        let t = column(&sim, "t")?;
+        let before = t.partition_point(|&x| x < TWIN_GUST_AT - GUST_REFERENCE_SPAN);
+        let from = t.partition_point(|&x| x < TWIN_GUST_AT);
+        let after = t.partition_point(|&x| x < TWIN_GUST_AT + TWIN_GUST_DURATION);
+        let mut out = TwinGust {
+            swing_iae: 0.0,
+            resettle: 0.0,
+        };
+        let band = SETTLE_BAND * self.step.abs();
+        for (v_name, s_name) in [("vn", "swing_true_n"), ("ve", "swing_true_e")]
+            .iter()
+            .take(self.axes)
+        {
+            let swing = column(&sim, s_name)?;
+            let reference = mean(&swing[before..from]);
+            out.swing_iae += (from + 1..t.len())
+                .map(|k| (swing[k] - reference).abs().to_degrees() * (t[k] - t[k - 1]))
+                .sum::<f64>();
+            let v = column(&sim, v_name)?;
+            let resettle = match v[after..]
+                .iter()
+                .rposition(|x| (x - self.step).abs() > band)
+            {
+                None => 0.0,
+                Some(k) if after + k + 1 >= v.len() => f64::INFINITY,
+                Some(k) => t[after + k + 1] - (TWIN_GUST_AT + TWIN_GUST_DURATION),
+            };
+            out.resettle = out.resettle.max(resettle);
+        }
+        if !out.swing_iae.is_finite() {
+            return Ok(TwinGust::diverged());
         }
         Ok(out)
     }
@@ -579,6 +668,33 @@ mod tests {
         // A bad figure is an error, not a silently different filter.
         tpl.diagnostics.measurement_noise = Some(-1.0);
         assert!(MpcController::new(&tpl, mpc).is_err());
+    }
+
+    /// The gust flight: a headwind gust pushes the velocity off the setpoint and swings the
+    /// payload; an estimator whose disturbances move faster takes the gust's force up
+    /// sooner, and one that carries the faster rate in its model flies as the settings
+    /// asking for it would.
+    #[test]
+    fn a_gust_is_taken_up_sooner_by_a_faster_disturbance_estimate() {
+        let (mut tpl, _, twin) = builtin_twin();
+        let gust = |model: &LinearModel, q: f64| {
+            let settings = MpcSettings {
+                kf_disturbance_noise: q,
+                ..MpcSettings::default()
+            };
+            twin.gust(MpcController::new(model, settings).unwrap())
+                .unwrap()
+        };
+        let slow = gust(&tpl, 0.02);
+        let fast = gust(&tpl, 0.05);
+        assert!(slow.swing_iae > 0.5, "{slow:?}");
+        assert!(slow.resettle.is_finite() && slow.resettle > 0.0, "{slow:?}");
+        assert!(fast.resettle < slow.resettle, "{fast:?} vs {slow:?}");
+        // The model's figure is a floor on the settings' rate.
+        tpl.diagnostics.disturbance_noise = Some(0.05);
+        assert_eq!(gust(&tpl, 0.02), fast);
+        tpl.diagnostics.disturbance_noise = Some(f64::NAN);
+        assert!(MpcController::new(&tpl, MpcSettings::default()).is_err());
     }
 
     #[test]

@@ -141,6 +141,11 @@ pub struct Diagnostics {
     /// flight's swing-sensor noise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub swing_measurement_noise: Option<f64>,
+    /// Kalman process noise std of the disturbances an MPC on this model assumes at least
+    /// (`MpcSettings::kf_disturbance_noise`): set by the control-relevant selection's
+    /// disturbance design, on the twin's gust flight.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub disturbance_noise: Option<f64>,
     /// Anything else callers attach (search table, sweep settings …).
     #[serde(flatten)]
     pub extra: serde_json::Map<String, serde_json::Value>,
@@ -333,6 +338,7 @@ impl LinearModel {
                 "swing_measurement_noise",
                 self.diagnostics.swing_measurement_noise,
             ),
+            ("disturbance_noise", self.diagnostics.disturbance_noise),
         ] {
             if let Some(r) = r {
                 if !(r.is_finite() && r > 0.0) {

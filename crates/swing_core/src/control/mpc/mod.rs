@@ -72,7 +72,8 @@ pub struct MpcSettings {
     /// constant disturbance), `velocity` (the thesis's eq. 5.33) or `input`.
     pub disturbance: DisturbanceModel,
     /// Kalman process noise std of each disturbance per tick [m/s² for velocity/input;
-    /// state units per second for state].
+    /// state units per second for state]; a model that carries a larger one
+    /// (`Diagnostics::disturbance_noise`, from the selection's disturbance design) raises it.
     pub kf_disturbance_noise: f64,
     /// With `disturbance = "state"`: process noise std of the swing disturbances, as a
     /// fraction of `kf_disturbance_noise` (1 = same; < 1 adapts to a steady payload force
@@ -287,8 +288,9 @@ pub(crate) fn check_model(model: &LinearModel) -> Result<(usize, usize, usize), 
     Ok((n, q, m))
 }
 
-/// `settings` checked, with the Kalman measurement noise raised to what the model carries
-/// (a model selected on noisy data says how much noise its estimator must assume).
+/// `settings` checked, with the Kalman measurement noise and the disturbances' process noise
+/// raised to what the model carries (a model selected on noisy data says how much noise its
+/// estimator must assume, one designed against a gust how fast its disturbances move).
 pub(crate) fn settings_for(
     model: &LinearModel,
     settings: MpcSettings,
@@ -303,6 +305,10 @@ pub(crate) fn settings_for(
         positive("swing_measurement_noise", r)?;
         let own = settings.swing_measurement_noise();
         settings.kf_swing_measurement_noise = Some(own.max(r));
+    }
+    if let Some(q) = model.diagnostics.disturbance_noise {
+        positive("disturbance_noise", q)?;
+        settings.kf_disturbance_noise = settings.kf_disturbance_noise.max(q);
     }
     Ok(settings)
 }
