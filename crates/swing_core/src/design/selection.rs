@@ -396,28 +396,8 @@ impl SelectionSettings {
         positive("twin_bounds.final_error", self.twin_bounds.final_error)?;
         positive("twin_bounds.wander", self.twin_bounds.wander)?;
         positive("twin_bounds.late_error", self.twin_bounds.late_error)?;
-        if self.noise_factors.is_empty()
-            || self
-                .noise_factors
-                .iter()
-                .any(|f| !(*f >= 1.0 && f.is_finite()))
-        {
-            return Err(ConfigError::new(
-                "noise_factors",
-                "must be one or more finite factors of at least 1 (1 = the noise as set)",
-            ));
-        }
-        if self.disturbance_factors.is_empty()
-            || self
-                .disturbance_factors
-                .iter()
-                .any(|f| !(*f >= 1.0 && f.is_finite()))
-        {
-            return Err(ConfigError::new(
-                "disturbance_factors",
-                "must be one or more finite factors of at least 1 (1 = the rate as set)",
-            ));
-        }
+        design_factors("noise_factors", &self.noise_factors, "the noise")?;
+        design_factors("disturbance_factors", &self.disturbance_factors, "the rate")?;
         positive("wander_sigmas", self.wander_sigmas)?;
         non_negative("twin_bounds.swing_vs_pid", self.twin_bounds.swing_vs_pid)?;
         non_negative(
@@ -1119,6 +1099,18 @@ pub fn select_for_control(
     })
 }
 
+/// A design variable's factors (`noise_factors`, `disturbance_factors`): one or more,
+/// each finite and at least 1, which stands for `what` as set.
+fn design_factors(field: &str, factors: &[f64], what: &str) -> Result<(), ConfigError> {
+    if factors.is_empty() || factors.iter().any(|f| !(*f >= 1.0 && f.is_finite())) {
+        return Err(ConfigError::new(
+            field,
+            format!("must be one or more finite factors of at least 1 (1 = {what} as set)"),
+        ));
+    }
+    Ok(())
+}
+
 /// One design of the disturbance estimate's rate tried on the twin's gust.
 #[derive(Clone)]
 struct DisturbanceTrial {
@@ -1169,9 +1161,8 @@ fn design_disturbance(
     settings: &SelectionSettings,
     passes: impl Fn(&LinearModel, MpcController) -> Result<bool, ControlError> + Sync,
 ) -> Result<(LinearModel, serde_json::Value), ControlError> {
-    let base = MpcController::new(&model, mpc_settings.clone())?
-        .settings()
-        .kf_disturbance_noise;
+    let base =
+        crate::control::mpc::settings_for(&model, mpc_settings.clone())?.kf_disturbance_noise;
     let mut raised: Vec<f64> = factors.iter().copied().filter(|&f| f > 1.0).collect();
     raised.dedup();
     let mut designs = vec![(1.0, model.clone())];
