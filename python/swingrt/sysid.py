@@ -50,6 +50,8 @@ __all__ = [
     "identify",
     "identify_settings",
     "imu_swing_scale",
+    "flown_estimator",
+    "flies_measured_scale",
     "body_sensor",
     "model_body_sensor",
     "with_thrust",
@@ -203,19 +205,52 @@ def swing_source(data: Any) -> str:
 
 
 def _swing_columns(data: Any) -> tuple[Mapping[str, Any], str]:
-    """The flight's columns with the swing the identification reads (the IMU estimate in
-    place of absent swing columns, see :func:`swing_source`, at the estimator's own scale:
-    :func:`imu_swing_scale` measures the true one, which is reported, not flown), and its
-    source."""
+    """The flight's columns with the swing the identification reads, and its source: for
+    ``imu`` (no swing column, see :func:`swing_source`) the IMU estimate made by
+    :func:`flown_estimator`."""
     cols = _columns(data)
     src = swing_source(data)
     if src != "imu":
         return cols, src
     out = dict(cols)
-    for a in ("n", "e"):
-        if f"swing_est_{a}" in cols:
-            out[f"swing_{a}"] = cols[f"swing_est_{a}"]
+    swing = _flown(data)[1]
+    out["swing_n"], out["swing_e"] = swing[:, 0], swing[:, 1]
     return out, src
+
+
+def flown_estimator(data: Any) -> dict[str, Any] | None:
+    """The IMU swing estimator a model identified on ``data`` flies: the flight's own, with
+    the scale measured from it (:func:`imu_swing_scale`) where that is the smaller one.
+
+    The MPC's swing weight was set for the cable's angle, and at a scale k̂ the estimate
+    reads (k/k̂) of the angle plus (1 − k/k̂) of the vehicle's tilt. Where the payload is
+    lighter than the estimator assumed (k < k̂), the swing is read too small, the tilt leaks
+    in (three quarters of it at a quarter of the assumed mass), and an MPC on that output
+    damps the tilt more than the swing: the measured scale reads the angle. Where it is
+    heavier (k > k̂), the swing is read larger than it is, which weighs it more, and the
+    estimator's own scale is kept: flying the measured one there failed more in the
+    sensorless robustness study (README, "Nothing on the cable"). None when the flight keeps
+    its own estimator and does not say which (:func:`swing_estimator`)."""
+    est = _flown(data)[0]
+    return None if est is None else dict(est)
+
+
+def flies_measured_scale(scale: Mapping[str, Any]) -> bool:
+    """Whether a model flies the IMU estimate's measured scale, from what
+    :func:`imu_swing_scale` reported (``diagnostics``): where it is smaller than the assumed
+    one (:func:`flown_estimator`)."""
+    return scale.get("fit") is not None and scale["scale"] < scale["assumed_scale"]
+
+
+def _flown(data: Any) -> tuple[dict[str, Any] | None, np.ndarray]:
+    """:func:`flown_estimator`'s settings and the flight's estimate as they make it (N×2)."""
+    found = imu_swing_scale(data)
+    if flies_measured_scale(found["diagnostics"]):
+        return found["estimator"], found["swing"]
+    cols = _columns(data)
+    nan = np.full(len(cols["t"]), np.nan)
+    raw = [np.asarray(cols.get(f"swing_est_{a}", nan), dtype=float) for a in "ne"]
+    return swing_estimator(data), np.column_stack(raw)
 
 
 #: What :func:`imu_swing_scale` found for a flight object (forgotten with it).
@@ -249,8 +284,8 @@ def imu_swing_scale(data: Any) -> dict[str, Any]:
     missing = [c for c in names if c not in cols]
     reason = f"the flight has no column(s) {', '.join(missing)}" if missing else None
     if reason is None:
-        # The measurement is reported, not flown: a gap in a column it alone reads (the
-        # attitude) refuses it rather than the identification.
+        # A gap in a column the measurement alone reads (the attitude) refuses the
+        # measurement, and the assumed scale is flown, rather than the identification.
         gaps = [c for c in names if not np.isfinite(np.asarray(cols[c], dtype=float)).all()]
         if gaps:
             reason = f"column(s) {', '.join(gaps)} are not finite throughout the flight"
@@ -378,13 +413,12 @@ def model_estimator(model: LinearModel) -> dict[str, Any] | None:
 def _with_source(model: LinearModel, data: Any) -> LinearModel:
     """``model`` with the flight's swing source in its diagnostics and, for ``imu``, the
     estimator's settings (a flight on the model must estimate the swing the same way) and
-    the scale measured from the flight (``swing_scale``, :func:`imu_swing_scale`). The model
-    flies the estimator's own scale: flying the measured one made the sensorless robustness
-    study fail more (13.0 % of 300 samples against 10.7 %; see the README)."""
+    the scale measured from the flight (``swing_scale``, :func:`imu_swing_scale`), which the
+    model flies (:func:`flown_estimator`)."""
     source = swing_source(data)
     extra: dict[str, Any] = {"swing_source": source}
     if source == "imu":
-        extra["swing_estimator"] = swing_estimator(data)
+        extra["swing_estimator"] = flown_estimator(data)
         extra["swing_scale"] = imu_swing_scale(data)["diagnostics"]
     if source == "body":
         extra["body_sensor"] = body_sensor(data)
@@ -598,10 +632,11 @@ def select_for_control(
     if plant.method != "whitebox":
         twin = None
     if twin is not None and swing_source(data) == "imu":
-        # The twin measures the swing as the flight did: the model's swing output is the IMU
-        # estimate (its scale and the drag it carries), and its MPC flies on that estimate.
+        # The twin measures the swing as a flight on the model does: the model's swing
+        # output is the IMU estimate (its scale and the drag it carries), and its MPC flies
+        # on that estimate.
         sensors: dict[str, Any] = {"swing": "imu"}
-        est = swing_estimator(data)
+        est = flown_estimator(data)
         if est is not None:
             sensors["estimator"] = est
         twin = twin.with_overrides({"sensors": sensors})

@@ -30,6 +30,7 @@ from swingrt.experiments.schema import Experiment
 from swingrt.io.flight import Trace
 from swingrt.metrics import step_metrics, swing_iae_floor
 from swingrt.reports import plot_case, plot_prediction, write_metrics
+from swingrt.sysid import flies_measured_scale
 
 
 class _Log:
@@ -43,20 +44,22 @@ class _Log:
 
 
 def swing_scale_note(scale: dict[str, Any]) -> str:
-    """What the report says of a model identified on the IMU's swing estimate: the scale it
-    flies (the estimator's) and the one measured from the training flight, or why the
-    measurement was refused."""
+    """What the report says of a model identified on the IMU's swing estimate: the scale
+    measured from the training flight against the one the estimator assumed, and which the
+    model flies (:func:`swingrt.sysid.flown_estimator`: the smaller), or why the
+    measurement was refused (the assumed scale is flown then)."""
     fit = scale.get("fit")
+    assumed = scale["assumed_scale"]
     if fit is None:
         return (
-            f"swing from the IMU at the scale {scale['assumed_scale']:.3f} m/s²; not "
-            f"measured from the flight: {scale['reason']}"
+            f"swing from the IMU at the assumed scale {assumed:.3f} m/s²; not measured from "
+            f"the flight: {scale['reason']}"
         )
+    flown = "measured" if flies_measured_scale(scale) else "assumed"
     return (
-        f"swing from the IMU at the scale {scale['assumed_scale']:.3f} m/s²; measured from "
-        f"the training flight: {scale['scale']:.3f} m/s² (g·m_p/m_Q, a pendulum of "
-        f"{fit['length']:.2f} m explaining {100 * fit['explained']:.0f} % of the estimate; "
-        "reported, not flown)"
+        f"swing from the IMU at the {flown} scale: measured from the training flight "
+        f"{scale['scale']:.3f} m/s² (g·m_p/m_Q, a pendulum of {fit['length']:.2f} m "
+        f"explaining {100 * fit['explained']:.0f} % of the estimate), assumed {assumed:.3f} m/s²"
     )
 
 
