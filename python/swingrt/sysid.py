@@ -413,8 +413,9 @@ def model_estimator(model: LinearModel) -> dict[str, Any] | None:
 def _with_source(model: LinearModel, data: Any) -> LinearModel:
     """``model`` with the flight's swing source in its diagnostics and, for ``imu``, the
     estimator's settings (a flight on the model must estimate the swing the same way) and
-    the scale measured from the flight (``swing_scale``, :func:`imu_swing_scale`), which the
-    model flies (:func:`flown_estimator`)."""
+    the scale measured from the flight (``swing_scale``, :func:`imu_swing_scale`); the
+    estimator it carries is the one it flies (:func:`flown_estimator`: the measured scale
+    only where it is the smaller)."""
     source = swing_source(data)
     extra: dict[str, Any] = {"swing_source": source}
     if source == "imu":
