@@ -220,7 +220,10 @@ def _swing_columns(data: Any) -> tuple[Mapping[str, Any], str]:
 
 def flown_estimator(data: Any) -> dict[str, Any] | None:
     """The IMU swing estimator a model identified on ``data`` flies: the flight's own, with
-    the scale measured from it (:func:`imu_swing_scale`) where that is the smaller one.
+    the scale measured from it (:func:`imu_swing_scale`) where that is the smaller one, and
+    then with the pendulum observer on the fitted cable (``length``, ``damping``:
+    ``swing_core::sensors::pendulum``), which tells the swing from the drag a light
+    payload's small pull lets dominate the estimate.
 
     The MPC's swing weight was set for the cable's angle, and at a scale k̂ the estimate
     reads (k/k̂) of the angle plus (1 − k/k̂) of the vehicle's tilt. Where the payload is
@@ -262,11 +265,12 @@ _SCALES: weakref.WeakKeyDictionary[Any, tuple[tuple[int, ...], dict[str, Any]]] 
 def imu_swing_scale(data: Any) -> dict[str, Any]:
     """The scale of a flight's IMU swing estimate, fitted to how that swing answers the
     vehicle's motion (``swing_core::sysid::swing_scale``): the estimator assumes the
-    payload-to-vehicle mass ratio, the fit measures it, with the airframe's drag the
-    estimate reads as swing. Returns ``estimator`` (the calibrated settings, or the flight's
-    own when the fit is refused), ``swing`` (N×2, the flight's estimate as the calibrated
-    estimator would have made it, on the flight's own times: the swing angle, plus the drag
-    read as swing) and ``diagnostics`` (``assumed_scale``, ``scale``, the ``fit`` or None and
+    payload-to-vehicle mass ratio, the fit measures it, with the cable's length and the
+    airframe's drag the estimate reads as swing. Returns ``estimator`` (the calibrated
+    settings, with the fitted pendulum for its observer, or the flight's own when the fit is
+    refused), ``swing`` (N×2, the flight's estimate as the calibrated estimator would have
+    made it, on the flight's own times: the swing angle, the drag told apart by the
+    observer) and ``diagnostics`` (``assumed_scale``, ``scale``, the ``fit`` or None and
     the ``reason`` it was refused: the fit needs the flight's ``vn``, ``ve``, ``roll``,
     ``pitch`` and ``yaw`` beside ``swing_est_*``)."""
     cols = _columns(data)

@@ -211,8 +211,9 @@ fn body_swing<'py>(
 /// fitted ratio, length, drag terms, explained share and residual) or None with `reason`
 /// saying why the fit is not to be used, `estimator` (the calibrated settings, or
 /// `settings` unchanged) and `estimate` (N×2: the swing the calibrated estimator would have
-/// made, to first order, or `estimate` unchanged). The calibrated estimator keeps reading
-/// the airframe's drag as swing (scaled) unless `remove_drag`.
+/// made, to first order, through its pendulum observer, or `estimate` unchanged). The
+/// calibrated estimator's observer tells the swing from drag; its low-passed estimate keeps
+/// reading the airframe's drag as swing (scaled) unless `remove_drag`.
 #[pyfunction]
 #[pyo3(signature = (vel, estimate, euler, dt, settings=None, remove_drag=false))]
 fn swing_scale_fit<'py>(
@@ -270,14 +271,17 @@ fn swing_scale_fit<'py>(
     };
     match swing_scale::fit(&axes, dt, &fit_settings) {
         Ok(fit) => {
-            for (j, ax) in axes.iter().enumerate() {
-                for (i, x) in fit.apply(ax).into_iter().enumerate() {
-                    corrected[[i, j]] = x;
-                }
+            let [cn, ce] = [fit.apply(&axes[0]), fit.apply(&axes[1])];
+            let first: Vec<[f64; 2]> = cn.iter().zip(&ce).map(|(n, e)| [*n, *e]).collect();
+            let v: Vec<[f64; 2]> = vn.iter().zip(&ve).map(|(n, e)| [*n, *e]).collect();
+            let calibrated = fit.calibrated(&s);
+            for (i, x) in calibrated.observe(&first, &v).into_iter().enumerate() {
+                corrected[[i, 0]] = x[0];
+                corrected[[i, 1]] = x[1];
             }
             out.set_item("fit", convert::to_py_object(py, &fit)?)?;
             out.set_item("reason", py.None())?;
-            out.set_item("estimator", convert::to_py_object(py, &fit.calibrated(&s))?)?;
+            out.set_item("estimator", convert::to_py_object(py, &calibrated)?)?;
         }
         Err(reason) => {
             corrected.assign(&est.as_array());

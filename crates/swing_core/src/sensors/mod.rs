@@ -5,16 +5,19 @@
 //!   a calibration polynomial per channel) and the composition of body angles with the
 //!   attitude into world-frame swing angles;
 //! - [`swing`]: the swing sources of a flight and the swing estimated from the IMU alone;
+//! - [`pendulum`]: the IMU's swing told apart from drag by the pendulum's dynamics;
 //! - [`filter`]: PX4's second-order Butterworth low-pass.
 
 pub mod cable;
 pub mod filter;
 pub mod imu;
+pub mod pendulum;
 pub mod swing;
 
 pub use cable::{body_angles, compose, BodySensorParams};
 pub use filter::{LowPass2, LowPass2x3};
 pub use imu::{Imu, ImuParams, ImuSample};
+pub use pendulum::PendulumObserver;
 pub use swing::{ImuSwingEstimator, ImuSwingSettings, SwingFilter, SwingSource};
 
 use serde::{Deserialize, Serialize};

@@ -37,6 +37,7 @@ use serde::{Deserialize, Serialize};
 
 use super::cable::compose_tangents;
 use super::filter::LowPass2;
+use super::pendulum::PendulumObserver;
 use crate::config::{in_range, non_negative, positive, ConfigError};
 use crate::plant::GRAVITY;
 
@@ -86,6 +87,11 @@ pub struct ImuSwingSettings {
     pub drag_linear: [f64; 2],
     /// Quadratic drag per vehicle mass removed, body x then y [1/m].
     pub drag_quadratic: [f64; 2],
+    /// Cable length of the pendulum observer that tells the swing from drag
+    /// ([`super::pendulum`]) [m]; 0 reads the low-passed estimate as the swing.
+    pub length: f64,
+    /// The observer's pendulum damping ratio.
+    pub damping: f64,
 }
 
 impl Default for ImuSwingSettings {
@@ -103,6 +109,8 @@ impl Default for ImuSwingSettings {
             tare: 1.0,
             drag_linear: [0.0; 2],
             drag_quadratic: [0.0; 2],
+            length: 0.0,
+            damping: 0.0,
         }
     }
 }
@@ -123,6 +131,8 @@ impl ImuSwingSettings {
             ));
         }
         in_range("tare", self.tare, 0.0, 60.0)?;
+        in_range("length", self.length, 0.0, 100.0)?;
+        in_range("damping", self.damping, 0.0, 2.0)?;
         for i in 0..2 {
             in_range(&format!("offset[{i}]"), self.offset[i], -50.0, 50.0)?;
             in_range(
@@ -142,12 +152,44 @@ impl ImuSwingSettings {
     }
 }
 
+impl ImuSwingSettings {
+    /// A low-passed estimate (made at this estimator's rate, from the flight's start) as this
+    /// estimator's pendulum observer reads it, driven by the vehicle's NED `velocity` (N, E)
+    /// [m/s] at the same samples: what [`ImuSwingEstimator::estimate`] returns, for a
+    /// flight's estimate remade offline. Unchanged without an observer (`length` 0).
+    pub fn observe(&self, estimate: &[[f64; 2]], velocity: &[[f64; 2]]) -> Vec<[f64; 2]> {
+        let Some(mut obs) = PendulumObserver::new(self.length, self.damping, 1.0 / self.rate)
+        else {
+            return estimate.to_vec();
+        };
+        let mut motion = SwingFilter::new(self.rate, self.cutoff);
+        // The online observer starts on the tare's last sample.
+        let start = ((self.tare * self.rate).round() as usize).saturating_sub(1);
+        estimate
+            .iter()
+            .zip(velocity)
+            .enumerate()
+            .map(|(k, (z, v))| {
+                motion.update(*v);
+                if k >= start {
+                    obs.update(*z, motion.rate())
+                } else {
+                    *z
+                }
+            })
+            .collect()
+    }
+}
+
 /// The swing estimated from the IMU, one sample at a time (module docs). No allocation after
 /// construction.
 #[derive(Clone, Debug)]
 pub struct ImuSwingEstimator {
     s: ImuSwingSettings,
     filter: SwingFilter,
+    /// The velocity's low-pass, whose rate drives the observer.
+    motion: SwingFilter,
+    observer: Option<PendulumObserver>,
     offset: [f64; 2],
     samples: u64,
     tare_samples: u64,
@@ -162,6 +204,8 @@ impl ImuSwingEstimator {
         let tare_samples = (settings.tare * settings.rate).round() as u64;
         Ok(Self {
             offset: settings.offset,
+            motion: filter,
+            observer: PendulumObserver::new(settings.length, settings.damping, 1.0 / settings.rate),
             s: settings,
             filter,
             samples: 0,
@@ -188,9 +232,12 @@ impl ImuSwingEstimator {
 
     /// Start over (a new flight): filters, tare and offset.
     pub fn reset(&mut self) {
+        let filter = SwingFilter::new(self.s.rate, self.s.cutoff);
         *self = Self {
             s: self.s.clone(),
-            filter: SwingFilter::new(self.s.rate, self.s.cutoff),
+            filter,
+            motion: filter,
+            observer: PendulumObserver::new(self.s.length, self.s.damping, 1.0 / self.s.rate),
             offset: self.s.offset,
             samples: 0,
             tare_samples: self.tare_samples,
@@ -239,18 +286,34 @@ impl ImuSwingEstimator {
             }
         }
         let a = self.angle(&accel, rot, &vel);
-        self.filter.update(a)
+        let z = self.filter.update(a);
+        // The vehicle's acceleration through the same low-pass as the estimate, so the
+        // observer's input and measurement carry the same lag.
+        self.motion.update([vel[0], vel[1]]);
+        match self.observer.as_mut() {
+            Some(obs) if self.samples >= self.tare_samples => obs.update(z, self.motion.rate()),
+            _ => z,
+        }
     }
 
-    /// The latest estimate (swing_n, swing_e) [rad] (zeros before the first sample).
+    /// The latest estimate (swing_n, swing_e) [rad] (zeros before the first sample): the
+    /// observer's swing once the tare is over when it has a length, else the low-passed
+    /// estimate.
     pub fn estimate(&self) -> [f64; 2] {
-        self.filter.angle()
+        match &self.observer {
+            Some(obs) if self.tared() => obs.angle(),
+            _ => self.filter.angle(),
+        }
     }
 
-    /// The latest estimate's rate (N, E) [rad/s]: the backward difference of the filtered
-    /// estimate (zeros before the second sample and right after the tare).
+    /// The latest estimate's rate (N, E) [rad/s]: the observer's swing rate, or without one
+    /// the backward difference of the filtered estimate (zeros before the second sample and
+    /// right after the tare).
     pub fn rate_estimate(&self) -> [f64; 2] {
-        self.filter.rate()
+        match &self.observer {
+            Some(obs) if self.tared() => obs.rate(),
+            _ => self.filter.rate(),
+        }
     }
 }
 

@@ -107,11 +107,14 @@ pub struct ScaleFit {
 }
 
 impl ScaleFit {
-    /// The estimator's settings with this fit's scale and (when it removes it) drag: its
-    /// estimate is then the swing itself.
+    /// The estimator's settings with this fit's scale, its pendulum for the observer that
+    /// tells the swing from drag, and (when it removes it) drag: its estimate is then the
+    /// swing itself.
     pub fn calibrated(&self, s: &ImuSwingSettings) -> ImuSwingSettings {
         let mut out = s.clone();
         out.scale = s.scale / self.ratio;
+        out.length = self.length;
+        out.damping = self.damping;
         if !self.drag_removed {
             return out;
         }
