@@ -360,7 +360,7 @@ def test_resume_skips_finished_samples_and_never_duplicates(cli, reference, tmp_
     batches = sorted((out / "results").glob("batch-*.parquet"))
     for f in batches[1::2]:
         f.unlink()
-    r = cli("campaign", spec, "--out", out, "--workers", "1")
+    r = cli("campaign", spec, "--out", out, "--workers", "2")
     assert r.returncode == 0, r.stderr
     assert f"{len(batches[1::2])} samples flown, {6 - len(batches[1::2])} already done" in r.stdout
     assert rows_equal(read_rows(out), read_rows(ref))
@@ -386,7 +386,7 @@ def test_kill_9_then_rerun_matches_an_uninterrupted_run(cli, reference, tmp_path
         proc.wait()
     done = len(list((out / "results").glob("batch-*.parquet")))
     assert 1 <= done < 6, "the run ended before it could be killed"
-    r = cli("campaign", spec, "--out", out, "--workers", "1")
+    r = cli("campaign", spec, "--out", out, "--workers", "2")
     assert r.returncode == 0, r.stderr
     assert rows_equal(read_rows(out), read_rows(ref))
     assert not list((out / "results").glob(".*"))
