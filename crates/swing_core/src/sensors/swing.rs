@@ -150,9 +150,7 @@ impl ImuSwingSettings {
         }
         Ok(())
     }
-}
 
-impl ImuSwingSettings {
     /// A low-passed estimate (made at this estimator's rate, from the flight's start) as this
     /// estimator's pendulum observer reads it, driven by the vehicle's NED `velocity` (N, E)
     /// [m/s] at the same samples: what [`ImuSwingEstimator::estimate`] returns, for a
