@@ -36,6 +36,7 @@ import numpy as np
 
 from swingrt import _core
 from swingrt.errors import ConfigError, DataError, IdentificationError, ModelError
+from swingrt.io.ulog import euler_to_quat
 from swingrt.scenario import scaled_inertia
 
 __all__ = [
@@ -412,6 +413,63 @@ def model_estimator(model: LinearModel) -> dict[str, Any] | None:
             "which estimator settings (diagnostics.swing_estimator)"
         )
     return dict(est)
+
+
+#: Columns a flight's IMU swing estimate is remade from (:func:`model_columns`).
+IMU_COLUMNS = ("imu_ax", "imu_ay", "imu_az", "roll", "pitch", "yaw", "vn", "ve", "vd")
+
+
+def model_columns(model: LinearModel, data: Any) -> Mapping[str, Any]:
+    """``data``'s columns with the swing that ``model``'s swing output stands for.
+
+    A model identified on the IMU's swing estimate (:func:`model_estimator`) outputs that
+    estimate as its own estimator makes it: its scale (the measured one for a light payload),
+    drag and pendulum observer. Another flight's estimate, made by that flight's estimator or
+    calibrated from that flight (what :func:`_swing_columns` gives), reads the swing in other
+    units, and a swing sensor reads the angle itself. So the flight's IMU (``imu_a*``, the
+    attitude and the velocity) is run through the model's estimator from the flight's start,
+    as a flight on the model runs it; an estimate the model's estimator already made
+    (``swing_est_*`` by the same settings: a flight on the model, a ULog loaded with them)
+    is read as it is. Without an IMU to remake it from
+    the flight is refused (``DataError``): its swing is not the model's output. A model on a
+    swing sensor reads what the identification reads."""
+    est = model_estimator(model)
+    if est is None:
+        return _swing_columns(data)[0]
+    cols = _columns(data)
+    want = dict(_core.ImuSwingEstimator(est).settings)
+    own = swing_estimator(data)
+    made = [np.asarray(cols.get(f"swing_est_{a}", []), dtype=float) for a in "ne"]
+    if (
+        own is not None
+        and all(len(m) == len(cols["t"]) and np.isfinite(m).all() for m in made)
+        and dict(_core.ImuSwingEstimator(own).settings) == want
+    ):
+        return {**cols, "swing_n": made[0], "swing_e": made[1]}
+    missing = [c for c in IMU_COLUMNS if c not in cols]
+    if missing:
+        raise DataError(
+            f"the model's swing is the IMU's estimate at scale {want['scale']:.4g} m/s²"
+            f"{' with the pendulum observer' if want['length'] > 0 else ''}; the flight has "
+            f"no column(s) {', '.join(missing)} to make it from"
+        )
+    src = {c: np.asarray(cols[c], dtype=float) for c in IMU_COLUMNS}
+    src["t"] = np.asarray(cols["t"], dtype=float)
+    src["yaw"] = np.unwrap(src["yaw"])
+    grid = resample(src, 1.0 / float(want["rate"]), names=IMU_COLUMNS)
+    stack = lambda *c: np.ascontiguousarray(np.column_stack(c))  # noqa: E731
+    swing = _core.estimate_swing(
+        stack(grid["imu_ax"], grid["imu_ay"], grid["imu_az"]),
+        stack(*euler_to_quat(grid["roll"], grid["pitch"], grid["yaw"])),
+        stack(grid["vn"], grid["ve"], grid["vd"]),
+        want,
+    )
+    t = src["t"]
+    return {
+        **cols,
+        "swing_n": np.interp(t, grid["t"], swing[:, 0]),
+        "swing_e": np.interp(t, grid["t"], swing[:, 1]),
+    }
 
 
 def _with_source(model: LinearModel, data: Any) -> LinearModel:
@@ -925,11 +983,13 @@ def evaluate(
 ) -> dict[str, Any]:
     """k-step rollout NMAE (section 4.6.2) of ``model`` on ``data`` resampled to the
     model's dt: ``starts`` evenly spaced start points, ``rollout`` seconds, true inputs only.
+    The swing scored is the one the model's output stands for (:func:`model_columns`: a
+    model on the IMU's estimate is scored on the flight's IMU through its own estimator).
     ``test_span`` limits scoring to the first seconds of the data (default: all of it).
     Returns ``{"nmae": mean, "per_state": {name: nmae}}``."""
     if not (math.isfinite(rollout) and rollout > 0):
         raise ConfigError(f"rollout: must be a positive number of seconds, not {rollout}")
-    cols = resample(_swing_columns(data)[0], model.dt, names=[*model.states, *model.inputs])
+    cols = resample(model_columns(model, data), model.dt, names=[*model.states, *model.inputs])
     x = np.column_stack([cols[s] for s in model.states])
     u = np.column_stack([cols[s] for s in model.inputs])
     if test_span is not None:
