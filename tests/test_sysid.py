@@ -95,6 +95,17 @@ def test_dmdc_recovers_linear_system_exactly():
     assert m.diagnostics["test_nmae"] < 1e-9
 
 
+def test_a_model_that_passed_no_closed_loop_check_warns_whoever_flies_it():
+    cols, _, _ = _linear_flight()
+    m = sysid.identify(cols, delays=1, offset="none", test_span=40.0)
+    assert sysid.unchecked_warning(m) is None
+    assert sysid.unchecked_warning(m.with_diagnostics({"control_check": {"passed": True}})) is None
+    pick = "none settled: the candidate that misses its bounds least"
+    failed = m.with_diagnostics({"control_check": {"passed": False, "pick": pick}})
+    text = sysid.unchecked_warning(failed)
+    assert text is not None and text.startswith("warning:") and pick in text
+
+
 def test_affine_offset_learns_constant_and_mean_offset_subtracts_mean():
     c = np.array([0.02, -0.01])
     cols, a, b = _linear_flight(c=c, seed=3)

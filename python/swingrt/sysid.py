@@ -398,6 +398,22 @@ def model_twin(model: LinearModel) -> tuple[_core.Scenario, tuple[float, float, 
     return training, payload
 
 
+def unchecked_warning(model: LinearModel) -> str | None:
+    """A line for whoever flies ``model`` when its selection found no candidate that passed
+    the closed-loop check (``diagnostics['control_check']['passed']`` false: the least
+    violating one was kept), else None. Such a model flies only because nothing better was
+    found, and fails far more often than one that passed (README, "Nothing on the
+    cable")."""
+    cc = model.diagnostics.get("control_check")
+    if not isinstance(cc, dict) or cc.get("passed", True):
+        return None
+    pick = cc.get("pick") or "the least violating candidate was kept"
+    return (
+        f"warning: no candidate passed the closed-loop check at identification ({pick}); "
+        "it may damp the swing little or settle slowly"
+    )
+
+
 def model_estimator(model: LinearModel) -> dict[str, Any] | None:
     """The swing estimator a flight on ``model`` must run: the settings it was identified
     with when its swing is the IMU's estimate (its swing output is that estimate: another

@@ -141,8 +141,13 @@ def run(args) -> int:
         return _fly_plan(args, plan)
     mission = Mission.from_toml(args.mission) if args.mission else Mission.default()
     controller, ts, axes = load_controller(args.model, adapt=args.adapt, twin=not args.no_twin)
+    from swingrt.sysid import LinearModel, unchecked_warning
+
+    warning = unchecked_warning(LinearModel.load(args.model))
+    if warning is not None:
+        print(f"fly: {warning}", flush=True)
     if args.adapt:
-        from swingrt.sysid import LinearModel, model_twin
+        from swingrt.sysid import model_twin
 
         path = "off (--no-twin)" if args.no_twin else "the model's own"
         if not args.no_twin and model_twin(LinearModel.load(args.model)) is None:
