@@ -446,20 +446,17 @@ def model_columns(model: LinearModel, data: Any) -> Mapping[str, Any]:
     attitude and the velocity) is run through the model's estimator from the flight's start,
     as a flight on the model runs it; an estimate the model's estimator already made
     (``swing_est_*`` by the same settings: a flight on the model, a ULog loaded with them)
-    is read as it is. Without an IMU to remake it from
-    the flight is refused (``DataError``): its swing is not the model's output. A model on a
-    swing sensor reads what the identification reads."""
+    is read as it is. Without an IMU to remake it from the flight is refused (``DataError``):
+    its swing is not the model's output. A model on a swing sensor reads what the
+    identification reads."""
     est = model_estimator(model)
     if est is None:
         return _swing_columns(data)[0]
     cols = _columns(data)
     want = dict(_core.ImuSwingEstimator(est).settings)
-    own = swing_estimator(data)
     made = [np.asarray(cols.get(f"swing_est_{a}", []), dtype=float) for a in "ne"]
-    if (
-        own is not None
-        and all(len(m) == len(cols["t"]) and np.isfinite(m).all() for m in made)
-        and dict(_core.ImuSwingEstimator(own).settings) == want
+    if _estimated_by(data, want) and all(
+        len(m) == len(cols["t"]) and np.isfinite(m).all() for m in made
     ):
         return {**cols, "swing_n": made[0], "swing_e": made[1]}
     missing = [c for c in IMU_COLUMNS if c not in cols]
@@ -486,6 +483,19 @@ def model_columns(model: LinearModel, data: Any) -> Mapping[str, Any]:
         "swing_n": np.interp(t, grid["t"], swing[:, 0]),
         "swing_e": np.interp(t, grid["t"], swing[:, 1]),
     }
+
+
+def _estimated_by(data: Any, settings: Mapping[str, Any]) -> bool:
+    """Whether ``data``'s ``swing_est_*`` were made by an estimator of ``settings`` (complete
+    ones, as the core fills them in); a flight that does not say, or names settings the core
+    refuses, was not."""
+    own = swing_estimator(data)
+    if own is None:
+        return False
+    try:
+        return dict(_core.ImuSwingEstimator(own).settings) == dict(settings)
+    except (ConfigError, TypeError, ValueError):
+        return False
 
 
 def _with_source(model: LinearModel, data: Any) -> LinearModel:

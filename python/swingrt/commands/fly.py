@@ -141,16 +141,15 @@ def run(args) -> int:
         return _fly_plan(args, plan)
     mission = Mission.from_toml(args.mission) if args.mission else Mission.default()
     controller, ts, axes = load_controller(args.model, adapt=args.adapt, twin=not args.no_twin)
-    from swingrt.sysid import LinearModel, unchecked_warning
+    from swingrt.sysid import LinearModel, model_twin, unchecked_warning
 
-    warning = unchecked_warning(LinearModel.load(args.model))
+    model = LinearModel.load(args.model)
+    warning = unchecked_warning(model)
     if warning is not None:
         print(f"fly: {warning}", flush=True)
     if args.adapt:
-        from swingrt.sysid import model_twin
-
         path = "off (--no-twin)" if args.no_twin else "the model's own"
-        if not args.no_twin and model_twin(LinearModel.load(args.model)) is None:
+        if not args.no_twin and model_twin(model) is None:
             path = "none (the model was selected without one): online DMDc alone"
         print(f"fly: adaptive MPC, twin {path}", flush=True)
     watchdog = Watchdog(
