@@ -651,6 +651,27 @@ fn a_double_pendulum_is_found_with_its_links_and_a_single_one_is_not() {
     assert!((d.length - 1.0).abs() < 0.15, "{d:?}");
     assert!((d.length2 - 0.6).abs() < 0.1, "{d:?}");
     assert!((d.mass_ratio - 1.27).abs() < 0.3, "{d:?}");
+    // A short, heavy upper link with a longer one below: the single pendulum the least
+    // squares give (about the upper link) is a poor instrument, and its refined IV leaves
+    // the physical range; the least-squares pendulum must stand in for it, or the links
+    // are not fitted at all and the white-box falls back to a spectral peak of the
+    // flight's manoeuvres (31 m on `robustness-vehicle` seed 12, sample 468).
+    let long_below = PayloadParams {
+        kind: PayloadKind::Double,
+        mass: 0.49,
+        length: 0.33,
+        mass2: 0.16,
+        length2: 0.73,
+        ..PayloadParams::default()
+    };
+    let (v, th) = training(long_below, 0.002);
+    let fit = links::fit(&v, &th, 0.03, &links::LinkSettings::default())
+        .expect("no pendulum fitted to a short link with a long one below");
+    assert!(fit.length > 0.25 && fit.length < 1.1, "{fit:?}");
+    let d = fit.double.expect("no second link found below a short one");
+    assert!((d.length - 0.33).abs() < 0.05, "{d:?}");
+    assert!((d.length2 - 0.73).abs() < 0.07, "{d:?}");
+    assert!((d.mass_ratio - 0.33).abs() < 0.08, "{d:?}");
     for length in [0.5, 1.5, 2.8] {
         let single = PayloadParams {
             mass: 0.3,

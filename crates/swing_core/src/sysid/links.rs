@@ -428,9 +428,11 @@ pub fn fit(v: &[f64], theta: &[f64], dt: f64, settings: &LinkSettings) -> Option
         from,
     };
     // The single pendulum first: least squares (its bias is small, one mode of one
-    // length), refined by IV.
-    let ls = iv_step(&f, &f.theta, false)?;
-    let single = refine(&f, v, dt, coefficients(&ls), false, settings)?;
+    // length), refined by IV. Where the swing is a double pendulum's whose lower link is
+    // the longer, one pendulum is a poor instrument and the IV can leave the physical
+    // range; the least-squares pendulum then stands, as the scale of the double's starts.
+    let ls = coefficients(&iv_step(&f, &f.theta, false)?);
+    let single = refine(&f, v, dt, ls, false, settings).unwrap_or(ls);
     let single_error = simulation_error(&single, v, theta, dt, from, settings.instrument_damping);
     let l = single[2] * GRAVITY;
     if !(l > 0.0 && single_error.is_finite()) {
