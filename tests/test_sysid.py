@@ -1092,3 +1092,31 @@ def test_a_twin_of_no_mass_is_refused_by_name(mass):
     built-in payload: refused naming the vehicle's mass, not a payload field."""
     with pytest.raises(ConfigError, match="vehicle_mass"):
         sysid.builtin_twin(mass)
+
+
+def test_a_pick_that_hangs_on_the_payload_s_estimated_lengths_is_refused():
+    """Sample 49 of the vehicle-varied robustness campaign, seed 12: a double pendulum (0.27
+    kg on 0.73 m, 0.19 kg 0.54 m below) whose links the fit finds within 5 % (0.77 / 0.53
+    m). On the nominal twin alone the low-order q = 6, p = 6 passes and is picked, and on
+    the vehicle it never settles; flown also with the twin's links 10 % shorter and longer
+    (the default payload tolerance), it is refused for that, and the pick flies within the
+    campaign's bounds."""
+    from swingrt.experiments.identification import case_twin
+
+    train, train_sc, ev = _campaign_sample(49, "robustness-vehicle", seed=12)
+    twin = case_twin(_campaign_experiment(49, "robustness-vehicle", seed=12), train_sc)
+    result = sysid.search(train, vehicle_mass=train_sc.to_dict()["vehicle"]["mass"])
+    nominal = sysid.select_for_control(train, result, twin=twin, payload_tolerance=0.0).model
+    assert (nominal.delays, nominal.rank) == (6, 6)
+    model = sysid.select_for_control(train, result, twin=twin).model
+    checked = model.diagnostics["control_check"]["checked"]
+    fragile = next(c for c in checked if (c["delays"], c["rank"]) == (6, 6))
+    assert fragile["payload_miss"] > 1.0, fragile
+    assert len(fragile["refused"]) == 1, fragile
+    assert "payload's lengths off by the tolerance" in fragile["refused"][0], fragile
+    assert (model.delays, model.rank) != (6, 6)
+    pid = _fly(ev, controller="pid")["swing_excess_iae_deg_s"]
+    picked = _fly(ev, model)
+    assert math.isfinite(picked["v_settle_s"]), picked
+    assert picked["swing_excess_iae_deg_s"] < 0.4 * pid, (picked, pid)
+    assert math.isinf(_fly(ev, nominal)["v_settle_s"])

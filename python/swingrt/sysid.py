@@ -628,6 +628,7 @@ def select_for_control(
     twin_bounds: Mapping[str, float] | None = None,
     noise_factors: Sequence[float] | None = None,
     disturbance_factors: Sequence[float] | None = None,
+    payload_tolerance: float | None = None,
     wander_sigmas: float | None = None,
     check: tuple[LinearModel, str] | None = None,
     **settings: Any,
@@ -686,7 +687,11 @@ def select_for_control(
     that passes every flight again and is back within the settle band within the twin's
     ``settle`` after the gust is taken when the gust leaves less swing, and the model
     carries it (``diagnostics['disturbance_noise']``; ``control_check
-    ['disturbance_design']``). ``control_check['wander']`` reports the pick's predicted
+    ['disturbance_design']``). A candidate that passes every other flight also flies the
+    twin's step with every link of the payload ``1 ∓ payload_tolerance`` times as long
+    (default 0.1: the white-box's lengths are estimates) and must settle there within the
+    twin's step bounds (``checked[*].payload_miss``, the worst ratio of a figure to its
+    bound; 0 flies the nominal twin alone). ``control_check['wander']`` reports the pick's predicted
     wander on each checked loop. Without a white-box (a model-only check) the twin is not
     flown. A flight identified on the IMU's swing estimate (:func:`swing_source`) flies the
     twin on the same estimate (its ``sensors`` set to the flight's swing source and
@@ -711,6 +716,7 @@ def select_for_control(
         "twin_bounds": None if twin_bounds is None else dict(twin_bounds),
         "noise_factors": None if noise_factors is None else list(noise_factors),
         "disturbance_factors": None if disturbance_factors is None else list(disturbance_factors),
+        "payload_tolerance": payload_tolerance,
         "wander_sigmas": wander_sigmas,
     }
     selection = {k: v for k, v in given.items() if v is not None} | {"plant_label": label}

@@ -310,6 +310,23 @@ pub struct SelectionSettings {
     /// (`control_check.disturbance_design`). The pick then carries the raised noise
     /// (`Diagnostics::disturbance_noise`). `[1]`: the rate as set, no gust flown.
     pub disturbance_factors: Vec<f64>,
+    /// How far the twin's payload may be from the one it carries, as a fraction of its
+    /// lengths: a candidate that passes every other flight also flies the twin's step with
+    /// every link of the payload `1 − payload_tolerance` and `1 + payload_tolerance` times as
+    /// long ([`TwinPlant::with_payload_lengths`]) and must settle there within the twin's
+    /// step bounds (settle time, final error, overshoot, hold drift; the swing is judged on
+    /// the nominal twin): robust stability over the payload's uncertainty, performance on
+    /// its estimate. 0: the nominal twin alone.
+    ///
+    /// The lengths are the white-box's estimates: a single pendulum's is within 1–3 % of
+    /// the cable, a double pendulum's links within about 10 % (`sysid::links::fit` on the
+    /// robustness studies: seed 8's sample 191 fitted 0.90 / 0.72 m for 1.00 / 0.61 m, seed
+    /// 12's sample 49 0.77 / 0.53 m for 0.73 / 0.54 m). Sample 49's pick, a low-order model
+    /// (q = 6, p = 6), passed on the twin and never settled on the vehicle: flown in still
+    /// air on the vehicle with the twin's payload it was 0.13× PX4's swing, with the true
+    /// one (its upper link 5 % shorter) 0.75× and unsettled at 28 s, with the twin's links
+    /// 10 % shorter 1.96×.
+    pub payload_tolerance: f64,
     /// How many standard deviations of the predicted wander must fit within the final-error
     /// bound a flight is judged by (`TwinBounds::late_error`, 1 % of the step): 3.29, the
     /// two-sided 0.1 % point of the normal, so the noise alone ends at most one flight in a
@@ -350,6 +367,7 @@ impl Default for SelectionSettings {
             // The default and 2.5 times it. On `robustness-vehicle` seed 8, 0.05 for every
             // sample righted its four gust failures and failed five others: a rate per pick.
             disturbance_factors: vec![1.0, 2.5],
+            payload_tolerance: 0.1,
             wander_sigmas: 3.29,
             plant_label: "whitebox".into(),
         }
@@ -399,6 +417,12 @@ impl SelectionSettings {
         design_factors("noise_factors", &self.noise_factors, "the noise")?;
         design_factors("disturbance_factors", &self.disturbance_factors, "the rate")?;
         positive("wander_sigmas", self.wander_sigmas)?;
+        if !(0.0..1.0).contains(&self.payload_tolerance) {
+            return Err(ConfigError::new(
+                "payload_tolerance",
+                "must be a fraction of the payload's lengths in [0, 1)",
+            ));
+        }
         non_negative("twin_bounds.swing_vs_pid", self.twin_bounds.swing_vs_pid)?;
         non_negative(
             "twin_bounds.swing_excess_min",
@@ -429,6 +453,10 @@ pub enum Requirement {
     Wander,
     /// The twin hold flight's late error within `TwinBounds::late_error`.
     LateError,
+    /// The twin step flights with the payload's lengths off by
+    /// `SelectionSettings::payload_tolerance`: their worst miss of the twin's step bounds
+    /// ([`TwinBounds::miss`]) within 1.
+    PayloadTolerance,
     /// The twin step flight's swing excess within [`TwinBounds::swing_bound`].
     Swing,
 }
@@ -446,6 +474,9 @@ impl Requirement {
             Self::LinearHoldDrift => "linear worst hold drift",
             Self::Wander => "twin hold wander",
             Self::LateError => "twin hold late error",
+            Self::PayloadTolerance => {
+                "twin step with the payload's lengths off by the tolerance, its worst miss"
+            }
             Self::Swing => "twin swing excess",
         }
     }
@@ -456,6 +487,7 @@ impl Requirement {
         match self {
             Self::TwinSettle => (" s", " s"),
             Self::Swing => (" deg·s", " deg·s"),
+            Self::PayloadTolerance => ("× its bounds", "×"),
             _ => (" of the step", ""),
         }
     }
@@ -525,6 +557,10 @@ pub struct CandidateFigures {
     /// The twin hold flight, when the candidate settled on the step flight and the linear
     /// plants.
     pub hold: Option<TwinHold>,
+    /// The worst miss of the twin's step bounds ([`TwinBounds::miss`]) over the twin's step
+    /// flights with the payload's lengths off by the tolerance, when the candidate settled
+    /// on every flight before and a tolerance is set.
+    pub payload: Option<f64>,
 }
 
 impl CandidateFigures {
@@ -535,6 +571,7 @@ impl CandidateFigures {
             settings
                 .twin_bounds
                 .miss(&f, self.hold.as_ref(), &settings.bounds)
+                .max(self.payload.unwrap_or(0.0))
                 .max(1.0)
         });
         let linear = if self.worst.final_error.is_nan() {
@@ -564,7 +601,7 @@ fn not_flown() -> StepCheck {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Verdict {
     /// The requirements violated, in the order the flights are flown: twin step, linear
-    /// plants, twin hold, swing.
+    /// plants, twin hold, payload tolerance, swing.
     pub refusals: Vec<Refusal>,
 }
 
@@ -608,7 +645,8 @@ impl Verdict {
 /// flight `pid` of the same step (the swing's reference; no swing bound without it).
 ///
 /// The flights are gated as [`select_for_control`] flies them: the linear plants only after
-/// the twin step is admitted, the hold only after both. A later flight's figures are
+/// the twin step is admitted, the hold only after both, the payload's tolerance only after
+/// all three. A later flight's figures are
 /// therefore judged only when every earlier one was admitted; otherwise they were not
 /// flown (NaN, absent) and refuse nothing. The swing is judged whenever the twin flew.
 pub fn judge(
@@ -624,6 +662,9 @@ pub fn judge(
     }
     if let (true, Some(h)) = (refusals.is_empty(), &figures.hold) {
         refusals = settings.twin_bounds.hold_refusals(h);
+    }
+    if let (true, Some(miss)) = (refusals.is_empty(), figures.payload) {
+        refusals.extend(exceeds(Requirement::PayloadTolerance, miss, 1.0));
     }
     if let (Some(f), Some(pid)) = (&figures.twin, pid) {
         refusals.extend(settings.twin_bounds.swing_refusal(f, pid));
@@ -817,8 +858,17 @@ pub fn select_for_control(
     let mut verdicts = std::collections::HashMap::new();
     let mut checked: Vec<CheckedCandidate> = Vec::new();
     let pid = twin.map(TwinPlant::pid_flight);
+    // The twin with the payload's links shorter and longer by the tolerance.
+    let payload_twins = match twin {
+        Some(tw) if settings.payload_tolerance > 0.0 => [-1.0, 1.0]
+            .into_iter()
+            .map(|sign| tw.with_payload_lengths(1.0 + sign * settings.payload_tolerance))
+            .collect::<Result<Vec<_>, _>>()?,
+        _ => Vec::new(),
+    };
     // One candidate's figures and their verdict: the twin's step flight, then the linear
-    // plants, then the twin's hold, each only when `judge` admits every flight before it.
+    // plants, then the twin's hold, then the payload's tolerance, each only when `judge`
+    // admits every flight before it.
     // The MPC is designed once; every flight flies a fresh copy of it.
     let evaluate = |model: &LinearModel,
                     mpc: MpcController|
@@ -831,6 +881,7 @@ pub fn select_for_control(
             worst: not_flown(),
             twin: step.as_ref().map(|s| s.flight),
             hold: None,
+            payload: None,
         };
         let on_twin = figures
             .twin
@@ -846,8 +897,16 @@ pub fn select_for_control(
         }
         if let (Some(tw), Some(step)) = (twin, step) {
             if judge(&figures, pid, settings).settled() {
-                figures.hold = Some(tw.hold_on(step, mpc)?);
+                figures.hold = Some(tw.hold_on(step, mpc.fresh_copy()?)?);
             }
+        }
+        if !payload_twins.is_empty() && judge(&figures, pid, settings).settled() {
+            let mut worst = 0.0_f64;
+            for tw in &payload_twins {
+                let f = tw.fly_with(mpc.fresh_copy()?)?.flight;
+                worst = worst.max(settings.twin_bounds.miss(&f, None, &settings.bounds));
+            }
+            figures.payload = Some(worst);
         }
         Ok((figures, judge(&figures, pid, settings)))
     };
@@ -1089,6 +1148,7 @@ pub fn select_for_control(
             })),
             "wander": wander,
             "disturbance_design": disturbance_design,
+            "payload_tolerance": settings.payload_tolerance,
             "checked": checked.iter().map(checked_json).collect::<Vec<_>>(),
         }),
     );
@@ -1269,6 +1329,7 @@ fn checked_json(c: &CheckedCandidate) -> serde_json::Value {
         "twin": f.twin.as_ref().map(flight_json),
         "swing_measurement_noise": c.swing_measurement_noise,
         "hold": f.hold.map(|h| json!({"wander": h.wander, "late_error": h.late_error})),
+        "payload_miss": f.payload,
     })
 }
 
@@ -1321,6 +1382,7 @@ mod tests {
                 wander: 0.001,
                 late_error: 0.002,
             }),
+            payload: Some(0.8),
         }
     }
 
@@ -1479,9 +1541,59 @@ mod tests {
                 wander: t.wander,
                 late_error: t.late_error,
             }),
+            payload: Some(1.0),
         };
         let v = judge(&at_bounds, Some(&pid()), &s);
         assert!(v.passed(), "{:?}", v.reasons());
+    }
+
+    #[test]
+    fn a_candidate_that_does_not_settle_with_the_payload_off_by_the_tolerance_is_refused() {
+        let s = SelectionSettings::default();
+        // Its worst payload twin misses a step bound by half again: refused for that alone,
+        // so it is no longer a settled candidate, and it ranks by that miss.
+        let fragile = CandidateFigures {
+            payload: Some(1.5),
+            ..good()
+        };
+        let v = verdict(&fragile);
+        assert_eq!(v.refusals.len(), 1, "{:?}", v.reasons());
+        assert_eq!(v.refusals[0].requirement, Requirement::PayloadTolerance);
+        assert!(!v.settled());
+        assert_eq!(
+            v.reasons(),
+            vec![
+                "twin step with the payload's lengths off by the tolerance, its worst miss \
+                 1.5× its bounds, over the bound 1×"
+            ]
+        );
+        assert_eq!(checked(fragile).miss(&s).0, 1.5);
+        // Not flown (no tolerance, or a flight before it refused) refuses nothing; a
+        // payload twin that diverged is refused.
+        assert!(verdict(&CandidateFigures {
+            payload: None,
+            ..good()
+        })
+        .passed());
+        let diverged = CandidateFigures {
+            payload: Some(f64::INFINITY),
+            ..good()
+        };
+        assert!(!verdict(&diverged).passed());
+        // It is judged only after the hold: a candidate the hold refused is refused for
+        // the hold alone.
+        let mut both = with_hold(|h| h.late_error = 0.02);
+        both.payload = Some(1.5);
+        let v = verdict(&both);
+        assert_eq!(v.refusals.len(), 1, "{:?}", v.reasons());
+        assert_eq!(v.refusals[0].requirement, Requirement::LateError);
+        for bad in [-0.1, 1.0, f64::NAN] {
+            let s = SelectionSettings {
+                payload_tolerance: bad,
+                ..SelectionSettings::default()
+            };
+            assert!(s.validate().is_err(), "{bad}");
+        }
     }
 
     #[test]

@@ -217,6 +217,11 @@ impl TwinPlant {
              still air)",
             sc.vehicle.mass
         );
+        Self::flown(sc, step, axes, label)
+    }
+
+    /// The twin of scenario `sc` (validated), with PX4's cascade alone flown on its step.
+    fn flown(sc: Scenario, step: f64, axes: usize, label: String) -> Result<Self, ConfigError> {
         let mut pid = Simulator::new(sc.clone())
             .map_err(|e| ConfigError::new("twin", format!("twin scenario: {e}")))?;
         let pid = match pid.run_to_end() {
@@ -231,6 +236,20 @@ impl TwinPlant {
             label,
             pid,
         })
+    }
+
+    /// This twin with every link of its payload `factor` times as long (the white-box's
+    /// lengths are estimates): a plant of the selection's payload tolerance
+    /// (`SelectionSettings::payload_tolerance`).
+    pub fn with_payload_lengths(&self, factor: f64) -> Result<Self, ConfigError> {
+        positive("factor", factor)?;
+        let mut sc = self.scenario.clone();
+        sc.payload.length *= factor;
+        sc.payload.length2 *= factor;
+        sc.validate()
+            .map_err(|e| ConfigError::new("twin", format!("twin scenario: {e}")))?;
+        let label = format!("{} with the payload's links {factor}× as long", self.label);
+        Self::flown(sc, self.step, self.axes, label)
     }
 
     /// The same step flown by PX4's cascade alone: the swing a candidate must damp.
@@ -601,6 +620,27 @@ mod tests {
 
     /// The step flight is measured on the first 20 s of the flight the hold goes on with:
     /// draw for draw the flight of a 20 s scenario, so holding on changes no figure.
+    #[test]
+    fn a_twin_with_longer_links_carries_them_and_flies_px4_on_them() {
+        let (_, _, twin) = builtin_twin();
+        let longer = twin.with_payload_lengths(1.1).unwrap();
+        let (p, q) = (&twin.scenario.payload, &longer.scenario.payload);
+        assert_eq!(q.length, 1.1 * p.length);
+        assert_eq!(q.length2, 1.1 * p.length2);
+        assert_eq!((q.mass, q.kind), (p.mass, p.kind));
+        // PX4's reference is flown on the longer pendulum: a slower swing, not the same
+        // flight.
+        assert_ne!(longer.pid_flight(), twin.pid_flight());
+        assert!(
+            longer.label().contains("1.1× as long"),
+            "{}",
+            longer.label()
+        );
+        for bad in [0.0, -1.0, f64::NAN] {
+            assert!(twin.with_payload_lengths(bad).is_err(), "{bad}");
+        }
+    }
+
     #[test]
     fn a_step_flight_held_on_is_the_step_flight_flown_alone() {
         let (tpl, mut plant, _) = builtin_twin();
