@@ -794,9 +794,16 @@ def test_the_twin_hold_flight_bounds_what_the_sensor_noise_does_to_the_velocity(
     result = sysid.search(train)
     plant = sysid.check_plant(train, result, settings=result.settings)[0].diagnostics
     assert abs(plant["whitebox"]["swing_noise"] / 0.009745 - 1.0) < 0.05, plant["whitebox"]
-    # Without the noise design and the wander bound the pick passes the noise on.
+    # Without the noise design and the wander bound (nor the slow vehicle, on which such a
+    # pick does not settle either) the pick passes the noise on.
     loose = sysid.select_for_control(
-        train, result, twin=train_sc, twin_bounds={"wander": 100.0}, noise_factors=[1.0]
+        train,
+        result,
+        twin=train_sc,
+        twin_bounds={"wander": 100.0},
+        noise_factors=[1.0],
+        slow_motor_lag=0.0,
+        slow_inertia=1.0,
     )
     picked = sysid.select_for_control(train, result, twin=train_sc)
     cc = picked.model.diagnostics["control_check"]
@@ -895,7 +902,8 @@ def test_the_twin_hold_flight_shows_an_oscillation_that_grows_too_slowly_for_the
     of the step) and the pick settles in flight."""
     train, train_sc, ev = _campaign_sample(349)
     result = sysid.search(train)
-    # Without the hold's bound (and the payload's tolerance, whose twins show it too).
+    # Without the hold's bound (and the payload's tolerance and the slow vehicle, whose
+    # twins show it too).
     loose = sysid.select_for_control(
         train,
         result,
@@ -903,6 +911,8 @@ def test_the_twin_hold_flight_shows_an_oscillation_that_grows_too_slowly_for_the
         twin_bounds={"late_error": 100.0},
         passers=1,
         payload_tolerance=0.0,
+        slow_motor_lag=0.0,
+        slow_inertia=1.0,
     )
     picked = sysid.select_for_control(train, result, twin=train_sc)
     cc = picked.model.diagnostics["control_check"]
@@ -1092,6 +1102,37 @@ def test_the_disturbance_rate_designed_on_the_twin_s_gust_takes_up_a_gust_in_fli
     assert designed["swing_excess_iae_deg_s"] < 0.35 * pid, (designed, pid)
 
 
+def test_a_raised_disturbance_rate_that_needs_the_twin_s_attitude_loop_is_refused():
+    """Sample 61 of the vehicle-varied robustness campaign, seed 13: a double pendulum on a
+    vehicle with slow motors (38 ms against the twin's 15) and 1.56 times the twin's pitch
+    inertia. On the nominal twin the pick's disturbance rate raised 2.5 times passes every
+    flight and leaves less of the gust's swing, so it is taken, and on the vehicle the
+    velocity never settles. On the slow vehicle (40 ms motors, 1.5 times the inertia) the
+    raised rate is refused, and the same pick with the rate as set damps the swing."""
+    from swingrt.experiments.identification import case_twin
+
+    train, train_sc, ev = _campaign_sample(61, "robustness-vehicle", seed=13)
+    twin = case_twin(_campaign_experiment(61, "robustness-vehicle", seed=13), train_sc)
+    result = sysid.search(train, vehicle_mass=train_sc.to_dict()["vehicle"]["mass"])
+    nominal = sysid.select_for_control(
+        train, result, twin=twin, slow_motor_lag=0.0, slow_inertia=1.0
+    ).model
+    assert nominal.diagnostics["control_check"]["disturbance_design"]["factor"] == 2.5
+    assert nominal.diagnostics["control_check"]["slow_vehicle"] is None
+    model = sysid.select_for_control(train, result, twin=twin).model
+    cc = model.diagnostics["control_check"]
+    assert "1.5× its inertia" in cc["slow_vehicle"], cc["slow_vehicle"]
+    assert (model.delays, model.rank) == (nominal.delays, nominal.rank)
+    flown, raised = cc["disturbance_design"]["tried"]
+    assert flown["passed"] and not raised["passed"], cc["disturbance_design"]
+    assert cc["disturbance_design"]["factor"] == 1.0
+    pid = _fly(ev, controller="pid")["swing_excess_iae_deg_s"]
+    picked = _fly(ev, model)
+    assert math.isfinite(picked["v_settle_s"]), picked
+    assert picked["swing_excess_iae_deg_s"] < 0.1 * pid, (picked, pid)
+    assert math.isinf(_fly(ev, nominal)["v_settle_s"])
+
+
 @pytest.mark.parametrize("mass", [0.0, -1.0, math.nan, math.inf, 0.05])
 def test_a_twin_of_no_mass_is_refused_by_name(mass):
     """No mass, or one so small that the twin's motors, scaled to it, cannot lift even the
@@ -1106,15 +1147,19 @@ def test_a_pick_that_hangs_on_the_payload_s_estimated_lengths_is_refused():
     m). On the nominal twin alone the low-order q = 6, p = 6 passes and is picked, and on
     the vehicle it never settles; flown also with the twin's links 10 % shorter and longer
     (the default payload tolerance), it is refused for that, and the pick flies within the
-    campaign's bounds."""
+    campaign's bounds. (The slow vehicle refuses it too; it is switched off here so that
+    the tolerance is tested alone.)"""
     from swingrt.experiments.identification import case_twin
 
     train, train_sc, ev = _campaign_sample(49, "robustness-vehicle", seed=12)
     twin = case_twin(_campaign_experiment(49, "robustness-vehicle", seed=12), train_sc)
     result = sysid.search(train, vehicle_mass=train_sc.to_dict()["vehicle"]["mass"])
-    nominal = sysid.select_for_control(train, result, twin=twin, payload_tolerance=0.0).model
+    fast = {"slow_motor_lag": 0.0, "slow_inertia": 1.0}
+    nominal = sysid.select_for_control(
+        train, result, twin=twin, payload_tolerance=0.0, **fast
+    ).model
     assert (nominal.delays, nominal.rank) == (6, 6)
-    model = sysid.select_for_control(train, result, twin=twin).model
+    model = sysid.select_for_control(train, result, twin=twin, **fast).model
     checked = model.diagnostics["control_check"]["checked"]
     fragile = next(c for c in checked if (c["delays"], c["rank"]) == (6, 6))
     assert fragile["payload_miss"] > 1.0, fragile

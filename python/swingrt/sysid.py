@@ -629,6 +629,8 @@ def select_for_control(
     noise_factors: Sequence[float] | None = None,
     disturbance_factors: Sequence[float] | None = None,
     payload_tolerance: float | None = None,
+    slow_motor_lag: float | None = None,
+    slow_inertia: float | None = None,
     wander_sigmas: float | None = None,
     check: tuple[LinearModel, str] | None = None,
     **settings: Any,
@@ -691,7 +693,11 @@ def select_for_control(
     twin's step with every link of the payload ``1 ∓ payload_tolerance`` times as long
     (default 0.1: the white-box's lengths are estimates) and must settle there within the
     twin's step bounds (``checked[*].payload_miss``, the worst ratio of a figure to its
-    bound; 0 flies the nominal twin alone). ``control_check['wander']`` reports the pick's predicted
+    bound; 0 flies the nominal twin alone), and on a slow vehicle: the twin with motors of
+    time constant ``slow_motor_lag`` [s] (default 0.04, where slower than its own) and
+    ``slow_inertia`` times its inertia (default 1.5), what the twin does not know of the
+    attitude loop (``checked[*].slow_vehicle_miss``; 0 and 1 fly none).
+    ``control_check['wander']`` reports the pick's predicted
     wander on each checked loop. Without a white-box (a model-only check) the twin is not
     flown. A flight identified on the IMU's swing estimate (:func:`swing_source`) flies the
     twin on the same estimate (its ``sensors`` set to the flight's swing source and
@@ -717,6 +723,8 @@ def select_for_control(
         "noise_factors": None if noise_factors is None else list(noise_factors),
         "disturbance_factors": None if disturbance_factors is None else list(disturbance_factors),
         "payload_tolerance": payload_tolerance,
+        "slow_motor_lag": slow_motor_lag,
+        "slow_inertia": slow_inertia,
         "wander_sigmas": wander_sigmas,
     }
     selection = {k: v for k, v in given.items() if v is not None} | {"plant_label": label}

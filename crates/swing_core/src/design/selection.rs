@@ -327,6 +327,27 @@ pub struct SelectionSettings {
     /// one (its upper link 5 % shorter) 0.75× and unsettled at 28 s, with the twin's links
     /// 10 % shorter 1.96×.
     pub payload_tolerance: f64,
+    /// The slow vehicle's motors: their first-order time constant [s]. A candidate that
+    /// passes every other flight also flies the twin's step on a slow vehicle — the twin
+    /// with its motors this slow (when slower than its own) and `slow_inertia` times its
+    /// inertia ([`TwinPlant::slowed`]) — and must settle there within the twin's step
+    /// bounds, as for the payload's tolerance: robust stability over what the twin does not
+    /// know of the attitude loop.
+    ///
+    /// The twin's motors and mass distribution are nominal (the built-in's, its inertia
+    /// scaled with the mass): `swingrt vehicle` cannot read them from PX4, and a user rarely
+    /// knows them. Hobby-class motors and propellers on 0.5–2 kg vehicles spin up with time
+    /// constants of about 10–40 ms. `robustness-vehicle` seed 13's sample 61 (motors of
+    /// 38 ms, pitch inertia 1.56× the twin's): its pick passed on the twin with the
+    /// disturbance rate raised 2.5× and never settled on the vehicle; with the rate as set
+    /// it flew 0.045× PX4's swing there. On a twin of 40 ms motors and 1.5× the inertia the
+    /// raised rate is refused.
+    pub slow_motor_lag: f64,
+    /// The slow vehicle's inertia, as a multiple of the twin's (≥ 1; see `slow_motor_lag`):
+    /// the same mass with its battery, arms or payload mount farther out (default 1.5).
+    /// With this 1 and `slow_motor_lag` no slower than the twin's motors (0) no slow
+    /// vehicle is flown.
+    pub slow_inertia: f64,
     /// How many standard deviations of the predicted wander must fit within the final-error
     /// bound a flight is judged by (`TwinBounds::late_error`, 1 % of the step): 3.29, the
     /// two-sided 0.1 % point of the normal, so the noise alone ends at most one flight in a
@@ -368,6 +389,8 @@ impl Default for SelectionSettings {
             // sample righted its four gust failures and failed five others: a rate per pick.
             disturbance_factors: vec![1.0, 2.5],
             payload_tolerance: 0.1,
+            slow_motor_lag: 0.04,
+            slow_inertia: 1.5,
             wander_sigmas: 3.29,
             plant_label: "whitebox".into(),
         }
@@ -423,6 +446,13 @@ impl SelectionSettings {
                 "must be a fraction of the payload's lengths in [0, 1)",
             ));
         }
+        non_negative("slow_motor_lag", self.slow_motor_lag)?;
+        if !(self.slow_inertia >= 1.0 && self.slow_inertia.is_finite()) {
+            return Err(ConfigError::new(
+                "slow_inertia",
+                "must be a multiple of the twin's inertia of at least 1",
+            ));
+        }
         non_negative("twin_bounds.swing_vs_pid", self.twin_bounds.swing_vs_pid)?;
         non_negative(
             "twin_bounds.swing_excess_min",
@@ -457,6 +487,10 @@ pub enum Requirement {
     /// `SelectionSettings::payload_tolerance`: their worst miss of the twin's step bounds
     /// ([`TwinBounds::miss`]) within 1.
     PayloadTolerance,
+    /// The twin step flight on the slow vehicle (`SelectionSettings::slow_motor_lag`,
+    /// `SelectionSettings::slow_inertia`): its miss of the twin's step bounds
+    /// ([`TwinBounds::miss`]) within 1.
+    SlowVehicle,
     /// The twin step flight's swing excess within [`TwinBounds::swing_bound`].
     Swing,
 }
@@ -477,6 +511,7 @@ impl Requirement {
             Self::PayloadTolerance => {
                 "twin step with the payload's lengths off by the tolerance, its worst miss"
             }
+            Self::SlowVehicle => "twin step on the slow vehicle, its miss",
             Self::Swing => "twin swing excess",
         }
     }
@@ -487,7 +522,7 @@ impl Requirement {
         match self {
             Self::TwinSettle => (" s", " s"),
             Self::Swing => (" deg·s", " deg·s"),
-            Self::PayloadTolerance => ("× its bounds", "×"),
+            Self::PayloadTolerance | Self::SlowVehicle => ("× its bounds", "×"),
             _ => (" of the step", ""),
         }
     }
@@ -561,6 +596,9 @@ pub struct CandidateFigures {
     /// flights with the payload's lengths off by the tolerance, when the candidate settled
     /// on every flight before and a tolerance is set.
     pub payload: Option<f64>,
+    /// The miss of the twin's step bounds on the slow vehicle, when the candidate settled
+    /// on every flight before the payload's tolerance and a slow vehicle is set.
+    pub slow: Option<f64>,
 }
 
 impl CandidateFigures {
@@ -572,6 +610,7 @@ impl CandidateFigures {
                 .twin_bounds
                 .miss(&f, self.hold.as_ref(), &settings.bounds)
                 .max(self.payload.unwrap_or(0.0))
+                .max(self.slow.unwrap_or(0.0))
                 .max(1.0)
         });
         let linear = if self.worst.final_error.is_nan() {
@@ -601,7 +640,7 @@ fn not_flown() -> StepCheck {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Verdict {
     /// The requirements violated, in the order the flights are flown: twin step, linear
-    /// plants, twin hold, payload tolerance, swing.
+    /// plants, twin hold, payload tolerance, slow vehicle, swing.
     pub refusals: Vec<Refusal>,
 }
 
@@ -645,8 +684,8 @@ impl Verdict {
 /// flight `pid` of the same step (the swing's reference; no swing bound without it).
 ///
 /// The flights are gated as [`select_for_control`] flies them: the linear plants only after
-/// the twin step is admitted, the hold only after both, the payload's tolerance only after
-/// all three. A later flight's figures are
+/// the twin step is admitted, the hold only after both, the payload's tolerance and the slow
+/// vehicle only after all three. A later flight's figures are
 /// therefore judged only when every earlier one was admitted; otherwise they were not
 /// flown (NaN, absent) and refuse nothing. The swing is judged whenever the twin flew.
 pub fn judge(
@@ -663,8 +702,12 @@ pub fn judge(
     if let (true, Some(h)) = (refusals.is_empty(), &figures.hold) {
         refusals = settings.twin_bounds.hold_refusals(h);
     }
-    if let (true, Some(miss)) = (refusals.is_empty(), figures.payload) {
+    let settled_before = refusals.is_empty();
+    if let (true, Some(miss)) = (settled_before, figures.payload) {
         refusals.extend(exceeds(Requirement::PayloadTolerance, miss, 1.0));
+    }
+    if let (true, Some(miss)) = (settled_before, figures.slow) {
+        refusals.extend(exceeds(Requirement::SlowVehicle, miss, 1.0));
     }
     if let (Some(f), Some(pid)) = (&figures.twin, pid) {
         refusals.extend(settings.twin_bounds.swing_refusal(f, pid));
@@ -866,9 +909,17 @@ pub fn select_for_control(
             .collect::<Result<Vec<_>, _>>()?,
         _ => Vec::new(),
     };
+    // The slow vehicle: the twin's motors and inertia where they are slower than its own.
+    let slow_twin = match twin {
+        Some(tw) if settings.slow_motor_lag > tw.motor_lag() || settings.slow_inertia > 1.0 => {
+            let tau = settings.slow_motor_lag.max(tw.motor_lag());
+            Some(tw.slowed(tau, settings.slow_inertia)?)
+        }
+        _ => None,
+    };
     // One candidate's figures and their verdict: the twin's step flight, then the linear
-    // plants, then the twin's hold, then the payload's tolerance, each only when `judge`
-    // admits every flight before it.
+    // plants, then the twin's hold, then the payload's tolerance and the slow vehicle, each
+    // only when `judge` admits every flight before it.
     // The MPC is designed once; every flight flies a fresh copy of it.
     let evaluate = |model: &LinearModel,
                     mpc: MpcController|
@@ -882,6 +933,7 @@ pub fn select_for_control(
             twin: step.as_ref().map(|s| s.flight),
             hold: None,
             payload: None,
+            slow: None,
         };
         let on_twin = figures
             .twin
@@ -900,13 +952,20 @@ pub fn select_for_control(
                 figures.hold = Some(tw.hold_on(step, mpc.fresh_copy()?)?);
             }
         }
-        if !payload_twins.is_empty() && judge(&figures, pid, settings).settled() {
+        let robust = judge(&figures, pid, settings).settled();
+        let miss = |tw: &TwinPlant| -> Result<f64, ControlError> {
+            let f = tw.fly_with(mpc.fresh_copy()?)?.flight;
+            Ok(settings.twin_bounds.miss(&f, None, &settings.bounds))
+        };
+        if robust && !payload_twins.is_empty() {
             let mut worst = 0.0_f64;
             for tw in &payload_twins {
-                let f = tw.fly_with(mpc.fresh_copy()?)?.flight;
-                worst = worst.max(settings.twin_bounds.miss(&f, None, &settings.bounds));
+                worst = worst.max(miss(tw)?);
             }
             figures.payload = Some(worst);
+        }
+        if let (true, Some(tw)) = (robust, &slow_twin) {
+            figures.slow = Some(miss(tw)?);
         }
         Ok((figures, judge(&figures, pid, settings)))
     };
@@ -1149,6 +1208,7 @@ pub fn select_for_control(
             "wander": wander,
             "disturbance_design": disturbance_design,
             "payload_tolerance": settings.payload_tolerance,
+            "slow_vehicle": slow_twin.as_ref().map(|tw| tw.label()),
             "checked": checked.iter().map(checked_json).collect::<Vec<_>>(),
         }),
     );
@@ -1330,6 +1390,7 @@ fn checked_json(c: &CheckedCandidate) -> serde_json::Value {
         "swing_measurement_noise": c.swing_measurement_noise,
         "hold": f.hold.map(|h| json!({"wander": h.wander, "late_error": h.late_error})),
         "payload_miss": f.payload,
+        "slow_vehicle_miss": f.slow,
     })
 }
 
@@ -1383,6 +1444,7 @@ mod tests {
                 late_error: 0.002,
             }),
             payload: Some(0.8),
+            slow: Some(0.9),
         }
     }
 
@@ -1476,6 +1538,20 @@ mod tests {
                 refusal(LateError, 0.02, 0.01),
             ),
             (
+                CandidateFigures {
+                    payload: Some(1.25),
+                    ..good()
+                },
+                refusal(PayloadTolerance, 1.25, 1.0),
+            ),
+            (
+                CandidateFigures {
+                    slow: Some(2.0),
+                    ..good()
+                },
+                refusal(SlowVehicle, 2.0, 1.0),
+            ),
+            (
                 with_twin(|f| f.swing_excess = 4.5),
                 refusal(Swing, 4.5, 3.0),
             ),
@@ -1542,6 +1618,7 @@ mod tests {
                 late_error: t.late_error,
             }),
             payload: Some(1.0),
+            slow: Some(1.0),
         };
         let v = judge(&at_bounds, Some(&pid()), &s);
         assert!(v.passed(), "{:?}", v.reasons());
@@ -1593,6 +1670,55 @@ mod tests {
                 ..SelectionSettings::default()
             };
             assert!(s.validate().is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn a_candidate_that_does_not_settle_on_the_slow_vehicle_is_refused_only_after_the_hold() {
+        let s = SelectionSettings::default();
+        let fragile = CandidateFigures {
+            slow: Some(3.0),
+            ..good()
+        };
+        let v = verdict(&fragile);
+        assert_eq!(
+            v.reasons(),
+            vec!["twin step on the slow vehicle, its miss 3× its bounds, over the bound 1×"]
+        );
+        assert!(!v.settled());
+        // It ranks by that miss when it is the worst, by the payload's when that is.
+        assert_eq!(checked(fragile).miss(&s).0, 3.0);
+        let both = CandidateFigures {
+            payload: Some(1.5),
+            slow: Some(1.2),
+            ..good()
+        };
+        assert_eq!(checked(both).miss(&s).0, 1.5);
+        assert_eq!(verdict(&both).refusals.len(), 2);
+        // Not flown refuses nothing; behind a refused hold it is not judged.
+        assert!(verdict(&CandidateFigures {
+            slow: None,
+            ..good()
+        })
+        .passed());
+        let mut held = with_hold(|h| h.wander = 0.008);
+        held.slow = Some(3.0);
+        assert_eq!(
+            verdict(&held).refusals,
+            vec![refusal(Requirement::Wander, 0.008, 0.005)]
+        );
+        for (tau, j) in [
+            (-0.01, 1.5),
+            (f64::NAN, 1.5),
+            (0.04, 0.9),
+            (0.04, f64::INFINITY),
+        ] {
+            let s = SelectionSettings {
+                slow_motor_lag: tau,
+                slow_inertia: j,
+                ..SelectionSettings::default()
+            };
+            assert!(s.validate().is_err(), "{tau} {j}");
         }
     }
 

@@ -252,6 +252,32 @@ impl TwinPlant {
         Self::flown(sc, self.step, self.axes, label)
     }
 
+    /// This twin with a slower attitude loop: its motors' time constant `motor_tau` [s]
+    /// and its inertia `inertia`× its own (the twin's motors and mass distribution are the
+    /// built-in's, which a user rarely knows better): the plant of the selection's slow
+    /// vehicle (`SelectionSettings::slow_motor_lag`, `SelectionSettings::slow_inertia`).
+    pub fn slowed(&self, motor_tau: f64, inertia: f64) -> Result<Self, ConfigError> {
+        positive("motor_tau", motor_tau)?;
+        positive("inertia", inertia)?;
+        let mut sc = self.scenario.clone();
+        sc.vehicle.motor_tau = motor_tau;
+        for j in sc.vehicle.inertia.iter_mut() {
+            *j *= inertia;
+        }
+        sc.validate()
+            .map_err(|e| ConfigError::new("twin", format!("twin scenario: {e}")))?;
+        let label = format!(
+            "{} with motors of lag {motor_tau} s and {inertia}× its inertia",
+            self.label
+        );
+        Self::flown(sc, self.step, self.axes, label)
+    }
+
+    /// The time constant of the twin's motors [s].
+    pub fn motor_lag(&self) -> f64 {
+        self.scenario.vehicle.motor_tau
+    }
+
     /// The same step flown by PX4's cascade alone: the swing a candidate must damp.
     pub fn pid_flight(&self) -> &TwinFlight {
         &self.pid
@@ -638,6 +664,37 @@ mod tests {
         );
         for bad in [0.0, -1.0, f64::NAN] {
             assert!(twin.with_payload_lengths(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn a_slowed_twin_carries_slower_motors_and_more_inertia_and_flies_px4_on_them() {
+        let (_, _, twin) = builtin_twin();
+        let slow = twin.slowed(0.04, 1.5).unwrap();
+        let (v, w) = (&twin.scenario.vehicle, &slow.scenario.vehicle);
+        assert_eq!(w.motor_tau, 0.04);
+        for (a, b) in v.inertia.iter().zip(&w.inertia) {
+            assert_eq!(*b, 1.5 * a);
+        }
+        assert_eq!(
+            (w.mass, &slow.scenario.payload),
+            (v.mass, &twin.scenario.payload)
+        );
+        // PX4's reference is flown on the slower vehicle: a lagging attitude loop.
+        assert_ne!(slow.pid_flight(), twin.pid_flight());
+        assert!(
+            slow.label().contains("lag 0.04 s and 1.5×"),
+            "{}",
+            slow.label()
+        );
+        for (tau, j) in [
+            (0.0, 1.5),
+            (-0.01, 1.5),
+            (f64::NAN, 1.5),
+            (0.04, 0.0),
+            (0.04, f64::NAN),
+        ] {
+            assert!(twin.slowed(tau, j).is_err(), "{tau} {j}");
         }
     }
 
