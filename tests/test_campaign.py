@@ -29,10 +29,13 @@ from swingrt.campaign.report import wilson, worst_samples
 from swingrt.campaign.sampling import draw, parse_distribution
 from swingrt.errors import ConfigError
 
+# Seed 5: its six samples identify in a few seconds each. On seed 3, sample 1 (0.23 kg on
+# 2.6 m with swing noise) flies all 600 candidates of both selection passes, none passing
+# (40 s), and the runs here fly a study's samples five times over.
 STUDY = """
 name = "tiny"
 samples = {samples}
-seed = 3
+seed = 5
 controllers = ["pid", "lqr", "mpc"]
 {extra}
 [base]

@@ -957,15 +957,22 @@ pub fn select_for_control(
             let f = tw.fly_with(mpc.fresh_copy()?)?.flight;
             Ok(settings.twin_bounds.miss(&f, None, &settings.bounds))
         };
-        if robust && !payload_twins.is_empty() {
-            let mut worst = 0.0_f64;
-            for tw in &payload_twins {
-                worst = worst.max(miss(tw)?);
+        if robust {
+            // The payload's tolerance and the slow vehicle: independent flights, side by
+            // side.
+            let robust_twins: Vec<&TwinPlant> =
+                payload_twins.iter().chain(slow_twin.as_ref()).collect();
+            let mut misses = crate::parallel::map(robust_twins, miss).into_iter();
+            if !payload_twins.is_empty() {
+                let mut worst = 0.0_f64;
+                for m in misses.by_ref().take(payload_twins.len()) {
+                    worst = worst.max(m?);
+                }
+                figures.payload = Some(worst);
             }
-            figures.payload = Some(worst);
-        }
-        if let (true, Some(tw)) = (robust, &slow_twin) {
-            figures.slow = Some(miss(tw)?);
+            if let Some(m) = misses.next() {
+                figures.slow = Some(m?);
+            }
         }
         Ok((figures, judge(&figures, pid, settings)))
     };

@@ -57,7 +57,9 @@ pub struct TwinPlant {
     step: f64,
     axes: usize,
     label: String,
-    pid: TwinFlight,
+    /// PX4's cascade alone on the step, flown when first asked for: the selection's
+    /// robust twins (payload tolerance, slow vehicle) never ask.
+    pid: std::sync::OnceLock<TwinFlight>,
 }
 
 /// Figures of one twin step flight.
@@ -217,18 +219,23 @@ impl TwinPlant {
              still air)",
             sc.vehicle.mass
         );
-        Self::flown(sc, step, axes, label)
+        Self::flown(sc, step, axes, label, true)
     }
 
-    /// The twin of scenario `sc` (validated), with PX4's cascade alone flown on its step.
-    fn flown(sc: Scenario, step: f64, axes: usize, label: String) -> Result<Self, ConfigError> {
-        let mut pid = Simulator::new(sc.clone())
-            .map_err(|e| ConfigError::new("twin", format!("twin scenario: {e}")))?;
-        let pid = match pid.run_to_end() {
-            Ok(()) => measure(&pid, usize::MAX, step, axes)
-                .map_err(|e| ConfigError::new("twin", format!("PX4 alone on the twin: {e}")))?,
-            Err(_) => TwinFlight::diverged(),
-        };
+    /// The twin of scenario `sc` (validated); PX4's cascade alone is flown on its step now
+    /// when `px4_now`, else when [`TwinPlant::pid_flight`] first asks.
+    fn flown(
+        sc: Scenario,
+        step: f64,
+        axes: usize,
+        label: String,
+        px4_now: bool,
+    ) -> Result<Self, ConfigError> {
+        let pid = std::sync::OnceLock::new();
+        if px4_now {
+            // Set on a lock just made: it cannot be set already.
+            let _ = pid.set(px4_alone(&sc, step, axes)?);
+        }
         Ok(Self {
             scenario: sc,
             step,
@@ -249,7 +256,7 @@ impl TwinPlant {
         sc.validate()
             .map_err(|e| ConfigError::new("twin", format!("twin scenario: {e}")))?;
         let label = format!("{} with the payload's links {factor}× as long", self.label);
-        Self::flown(sc, self.step, self.axes, label)
+        Self::flown(sc, self.step, self.axes, label, false)
     }
 
     /// This twin with a slower attitude loop: its motors' time constant `motor_tau` [s]
@@ -270,7 +277,7 @@ impl TwinPlant {
             "{} with motors of lag {motor_tau} s and {inertia}× its inertia",
             self.label
         );
-        Self::flown(sc, self.step, self.axes, label)
+        Self::flown(sc, self.step, self.axes, label, false)
     }
 
     /// The time constant of the twin's motors [s].
@@ -280,7 +287,12 @@ impl TwinPlant {
 
     /// The same step flown by PX4's cascade alone: the swing a candidate must damp.
     pub fn pid_flight(&self) -> &TwinFlight {
-        &self.pid
+        self.pid.get_or_init(|| {
+            // The scenario was validated when this twin was made and the twin's own step
+            // flew it; a flight that cannot be flown or measured here has no figures.
+            px4_alone(&self.scenario, self.step, self.axes)
+                .unwrap_or_else(|_| TwinFlight::diverged())
+        })
     }
 
     /// What the twin is, for the model's diagnostics.
@@ -491,6 +503,17 @@ impl TwinPlant {
     }
 }
 
+/// PX4's cascade alone flown on the twin scenario `sc` (a `step` [m/s] on `axes` axes).
+fn px4_alone(sc: &Scenario, step: f64, axes: usize) -> Result<TwinFlight, ConfigError> {
+    let mut sim = Simulator::new(sc.clone())
+        .map_err(|e| ConfigError::new("twin", format!("twin scenario: {e}")))?;
+    match sim.run_to_end() {
+        Ok(()) => measure(&sim, usize::MAX, step, axes)
+            .map_err(|e| ConfigError::new("twin", format!("PX4 alone on the twin: {e}"))),
+        Err(_) => Ok(TwinFlight::diverged()),
+    }
+}
+
 /// A twin step flight ([`TwinPlant::fly_with`]), its simulator kept to hold the step on.
 pub struct TwinStep {
     /// The step flight's figures.
@@ -680,7 +703,10 @@ mod tests {
             (w.mass, &slow.scenario.payload),
             (v.mass, &twin.scenario.payload)
         );
-        // PX4's reference is flown on the slower vehicle: a lagging attitude loop.
+        // The selection never asks a slowed twin for PX4's flight: it is flown when asked,
+        // on the slower vehicle (a lagging attitude loop), while the twin's own is flown
+        // with the twin.
+        assert!(slow.pid.get().is_none() && twin.pid.get().is_some());
         assert_ne!(slow.pid_flight(), twin.pid_flight());
         assert!(
             slow.label().contains("lag 0.04 s and 1.5×"),
