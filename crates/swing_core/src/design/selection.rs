@@ -989,10 +989,24 @@ pub fn select_for_control(
     let design_noise = |model: LinearModel,
                         factors: &[f64]|
      -> Result<(LinearModel, MpcController), ControlError> {
-        let mpc = MpcController::new(&model, mpc_settings.clone())?;
         let Some(swing) = swing_noise else {
+            let mpc = MpcController::new(&model, mpc_settings.clone())?;
             return Ok((model, mpc));
         };
+        if let [factor] = *factors {
+            // One factor (the strongest-filter pass): nothing to choose, so no wander to
+            // predict, and the estimator is designed once, at that noise, as
+            // `with_swing_measurement_noise` would redesign it.
+            let mut model = model;
+            if factor > 1.0 {
+                let base = crate::control::mpc::settings_for(&model, mpc_settings.clone())?
+                    .swing_measurement_noise();
+                model.diagnostics.swing_measurement_noise = Some(base * factor);
+            }
+            let mpc = MpcController::new(&model, mpc_settings.clone())?;
+            return Ok((model, mpc));
+        }
+        let mpc = MpcController::new(&model, mpc_settings.clone())?;
         let noise = check::MeasurementNoise {
             velocity: 0.0,
             swing,
@@ -1966,5 +1980,34 @@ mod tests {
             let err = s.validate().unwrap_err().to_string();
             assert!(err.contains("disturbance_factors"), "{err}");
         }
+    }
+
+    /// The strongest-filter pass designs its estimator once, with the noise in the model's
+    /// diagnostics: the same filter as redesigning a controller at that noise.
+    #[test]
+    fn a_model_carrying_a_swing_noise_designs_the_filter_a_redesign_at_it_gives() {
+        use crate::design::fixtures::template;
+        use crate::sim::Scenario;
+        let model = template(&Scenario::builtin("training").unwrap());
+        let settings = MpcSettings::default();
+        let base = crate::control::mpc::settings_for(&model, settings.clone())
+            .unwrap()
+            .swing_measurement_noise();
+        let redesigned = MpcController::new(&model, settings.clone())
+            .unwrap()
+            .with_swing_measurement_noise(10.0 * base)
+            .unwrap();
+        let mut noisy = model.clone();
+        noisy.diagnostics.swing_measurement_noise = Some(10.0 * base);
+        let once = MpcController::new(&noisy, settings).unwrap();
+        assert_eq!(once.settings(), redesigned.settings());
+        assert_eq!(once.estimator().gain(), redesigned.estimator().gain());
+        assert_eq!(
+            once.estimator().covariance(),
+            redesigned.estimator().covariance()
+        );
+        // ... and not the filter of the plain model.
+        let plain = MpcController::new(&model, MpcSettings::default()).unwrap();
+        assert_ne!(plain.estimator().gain(), once.estimator().gain());
     }
 }
