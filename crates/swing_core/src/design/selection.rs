@@ -23,8 +23,9 @@
 //! PX4's own on the same step. Of the first `passers` candidates that pass (looking at most
 //! `look_ahead` candidates past the first), the one that swings least on the twin is taken
 //! (one scalar cost; ties go to the lower NMAE, so without a twin the first that passes).
-//! When none passes and the flight's swing noise is known, the candidates are flown once
-//! more with the noise design's strongest filter (the largest of `noise_factors`): the
+//! When none passes and the flight's swing noise is known, the rows are flown again with
+//! the noise design's strongest filter (the largest of `noise_factors`), those the design
+//! already gave it skipped, so up to `candidates` rows beyond them are reached: the
 //! design's choice is a prediction of the wander, and a filter that trusts a noisy swing
 //! can leave the twin's step short of its final bound where the prediction saw no wander.
 //! When still none passes, the settled candidate that swings least (of both passes) is taken
