@@ -286,7 +286,7 @@ fn swing_scale_fit<'py>(
         Err(reason) => {
             corrected.assign(&est.as_array());
             out.set_item("fit", py.None())?;
-            out.set_item("reason", reason)?;
+            out.set_item("reason", reason.to_string())?;
             out.set_item("estimator", convert::to_py_object(py, &s)?)?;
         }
     }

@@ -23,7 +23,7 @@ os.environ.setdefault("MAVLINK20", "1")  # must precede pymavlink's dialect load
 
 from pymavlink import mavutil  # noqa: E402
 
-from swingrt.errors import LinkError  # noqa: E402
+from swingrt.errors import ConfigError, LinkError  # noqa: E402
 from swingrt.io.ulog import BODY_VECT_NAME  # noqa: E402
 
 __all__ = [
@@ -158,7 +158,7 @@ def connect(
     an onboard computer (component MAV_COMP_ID_ONBOARD_COMPUTER = 191).
     """
     if role not in ("node", "vehicle"):
-        raise ValueError(f"role must be 'node' or 'vehicle', not {role!r}")
+        raise ConfigError(f"role: must be 'node' or 'vehicle', not {role!r}")
     device, opts = _device(url, role)
     try:
         if device.startswith("udpin:"):

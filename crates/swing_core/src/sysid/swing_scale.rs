@@ -72,6 +72,62 @@ impl Default for ScaleSettings {
     }
 }
 
+/// Why [`fit`] gives no scale to use: the flight cannot be fitted, or its fit does not
+/// describe a payload.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum ScaleRefusal {
+    /// No axis was given, or the sample period is not positive.
+    #[error("no axis or no sample period")]
+    NoData,
+    /// An axis's velocity, estimate and tilt columns differ in length.
+    #[error("the axis's columns differ in length")]
+    ColumnLengths,
+    /// The flight is too short to fit after the settling span.
+    #[error("the flight is shorter than {seconds:.1} s")]
+    TooShort {
+        /// The shortest flight the fit takes [s].
+        seconds: f64,
+    },
+    /// A column holds NaN or infinity after the settling span.
+    #[error("the flight's velocity, estimate or attitude is not finite")]
+    NotFinite,
+    /// No pendulum of the searched lengths could be simulated.
+    #[error("no pendulum of the searched lengths could be simulated")]
+    NoPendulum,
+    /// The best pendulum lies on the length grid's bound.
+    #[error(
+        "the best pendulum is at the searched bound ({length:.2} m): the estimate does not \
+         swing like a payload"
+    )]
+    AtBound {
+        /// The bound's length [m].
+        length: f64,
+    },
+    /// The refined pendulum could not be simulated.
+    #[error("the best pendulum could not be simulated")]
+    Unsimulated,
+    /// The estimate leans against the vehicle's acceleration instead of with it.
+    #[error(
+        "the estimate answers the vehicle's motion with the wrong sign (1/ρ = {inverse_ratio:.3})"
+    )]
+    WrongSign {
+        /// The fitted 1/ρ.
+        inverse_ratio: f64,
+    },
+    /// The pendulum explains too little of the estimate beyond drag and bias.
+    #[error(
+        "the pendulum explains {:.0} % of the estimate (beyond drag), under {:.0} %",
+        100.0 * explained,
+        100.0 * minimum
+    )]
+    Unexplained {
+        /// The share explained.
+        explained: f64,
+        /// The smallest share used ([`ScaleSettings::min_explained`]).
+        minimum: f64,
+    },
+}
+
 /// One horizontal axis of a flight on a uniform grid: the vehicle's velocity [m/s], the
 /// estimator's swing [rad] and the vehicle's tilt [rad], filtered as the estimate is
 /// ([`tilt`]).
@@ -238,25 +294,24 @@ fn golden(mut a: f64, mut b: f64, f: impl Fn(f64) -> f64) -> f64 {
 
 /// Fit the estimate's scale and drag to the axes' motion (module docs), all sampled every
 /// `dt` [s]. The error says why the fit is not to be used.
-pub fn fit(axes: &[ScaleAxis], dt: f64, s: &ScaleSettings) -> Result<ScaleFit, String> {
+pub fn fit(axes: &[ScaleAxis], dt: f64, s: &ScaleSettings) -> Result<ScaleFit, ScaleRefusal> {
     if axes.is_empty() || !(dt.is_finite() && dt > 0.0) {
-        return Err("no axis or no sample period".into());
+        return Err(ScaleRefusal::NoData);
     }
     let from = (s.settle / dt).ceil() as usize;
     for ax in axes {
         let n = ax.velocity.len();
         if ax.estimate.len() != n || ax.tilt.len() != n {
-            return Err("the axis's columns differ in length".into());
+            return Err(ScaleRefusal::ColumnLengths);
         }
         if n < from.saturating_add(100) {
-            return Err(format!(
-                "the flight is shorter than {} s",
-                s.settle + 100.0 * dt
-            ));
+            return Err(ScaleRefusal::TooShort {
+                seconds: s.settle + 100.0 * dt,
+            });
         }
         let finite = |c: &[f64]| c[from..].iter().all(|x| x.is_finite());
         if !(finite(ax.velocity) && finite(ax.estimate) && finite(ax.tilt)) {
-            return Err("the flight's velocity, estimate or attitude is not finite".into());
+            return Err(ScaleRefusal::NotFinite);
         }
     }
     let rss = |l: f64, z: f64| regress(axes, dt, from, l, z).map_or(f64::INFINITY, |r| r.0);
@@ -268,13 +323,11 @@ pub fn fit(axes: &[ScaleAxis], dt: f64, s: &ScaleSettings) -> Result<ScaleFit, S
     let best = (0..n)
         .min_by(|&a, &b| scores[a].total_cmp(&scores[b]))
         .filter(|&i| scores[i].is_finite())
-        .ok_or("no pendulum of the searched lengths could be simulated")?;
+        .ok_or(ScaleRefusal::NoPendulum)?;
     if best == 0 || best == n - 1 {
-        return Err(format!(
-            "the best pendulum is at the searched bound ({:.2} m): the estimate does not \
-             swing like a payload",
-            grid[best].exp()
-        ));
+        return Err(ScaleRefusal::AtBound {
+            length: grid[best].exp(),
+        });
     }
     // The damping shapes how long each manoeuvre's swing rings on, so a wrong one biases
     // the scale: refine length and damping in turn (log scales), from the grid's best.
@@ -285,8 +338,8 @@ pub fn fit(axes: &[ScaleAxis], dt: f64, s: &ScaleSettings) -> Result<ScaleFit, S
         log_l = golden(log_l - step, log_l + step, |x| rss(x.exp(), log_z.exp()));
     }
     let (length, damping) = (log_l.exp(), log_z.exp());
-    let (rss, c, rss0) = regress(axes, dt, from, length, damping)
-        .ok_or("the best pendulum could not be simulated")?;
+    let (rss, c, rss0) =
+        regress(axes, dt, from, length, damping).ok_or(ScaleRefusal::Unsimulated)?;
     let samples: usize = axes.iter().map(|ax| ax.velocity.len() - from).sum();
     let explained = if rss0 > 0.0 { 1.0 - rss / rss0 } else { 0.0 };
     let fit = ScaleFit {
@@ -300,17 +353,15 @@ pub fn fit(axes: &[ScaleAxis], dt: f64, s: &ScaleSettings) -> Result<ScaleFit, S
         residual: (rss / samples as f64).sqrt(),
     };
     if !(c[0] > 0.0 && fit.ratio.is_finite()) {
-        return Err(format!(
-            "the estimate answers the vehicle's motion with the wrong sign (1/ρ = {:.3})",
-            c[0]
-        ));
+        return Err(ScaleRefusal::WrongSign {
+            inverse_ratio: c[0],
+        });
     }
     if explained < s.min_explained {
-        return Err(format!(
-            "the pendulum explains {:.0} % of the estimate (beyond drag), under {:.0} %",
-            100.0 * explained,
-            100.0 * s.min_explained
-        ));
+        return Err(ScaleRefusal::Unexplained {
+            explained,
+            minimum: s.min_explained,
+        });
     }
     Ok(fit)
 }
@@ -416,7 +467,12 @@ mod tests {
         };
         let err = fit(&[axis], 0.01, &ScaleSettings::default()).unwrap_err();
         assert!(
-            err.contains("explains") || err.contains("bound") || err.contains("sign"),
+            matches!(
+                err,
+                ScaleRefusal::Unexplained { .. }
+                    | ScaleRefusal::AtBound { .. }
+                    | ScaleRefusal::WrongSign { .. }
+            ),
             "{err}"
         );
         let short = ScaleAxis {
@@ -424,9 +480,9 @@ mod tests {
             estimate: &est[..200],
             tilt: &tilt[..200],
         };
-        assert!(fit(&[short], 0.01, &ScaleSettings::default())
-            .unwrap_err()
-            .contains("shorter"));
+        let err = fit(&[short], 0.01, &ScaleSettings::default()).unwrap_err();
+        assert!(matches!(err, ScaleRefusal::TooShort { .. }), "{err}");
+        assert_eq!(err.to_string(), "the flight is shorter than 6.0 s");
     }
 
     #[test]
