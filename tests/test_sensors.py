@@ -362,3 +362,42 @@ def test_an_attitude_gap_refuses_the_scale_measurement_not_the_identification():
     d = model.diagnostics["swing_scale"]
     assert d["fit"] is None and "roll" in d["reason"] and "not finite" in d["reason"], d
     assert d["scale"] == d["assumed_scale"]
+
+
+def test_a_flight_on_the_imu_is_judged_and_plotted_on_its_true_swing(monkeypatch, tmp_path):
+    """With no swing sensor the measured swing column is NaN; the metrics, the missions'
+    swing and a case's plot all read the simulator's true angle instead (one rule)."""
+    from swingrt import mission
+    from swingrt.metrics import step_metrics, swing_column
+    from swingrt.reports import plots
+
+    t = np.arange(0.0, 12.0, 0.01)
+    true = 0.1 * np.exp(-(t - 2.0).clip(0.0)) * np.sin(3.0 * (t - 2.0)) * (t >= 2.0)
+    nan = np.full_like(t, np.nan)
+    trace = Trace(
+        {
+            "t": t,
+            "vn": 2.0 * (t >= 2.0),
+            "ve": 0 * t,
+            "vel_sp_n": 2.0 * (t >= 2.0),
+            "acc_sp_n": 0 * t,
+            "acc_sp_e": 0 * t,
+            "swing_n": nan,
+            "swing_e": nan,
+            "swing_true_n": true,
+            "swing_true_e": 0 * t,
+        }
+    )
+    assert swing_column(trace, "n") == "swing_true_n"
+    assert swing_column({"swing_n": t}, "n") == "swing_n"
+    m = step_metrics(trace, t0=2.0, axis="n")
+    assert math.isfinite(m["swing_iae_deg_s"]) and m["swing_iae_deg_s"] > 0.0
+    np.testing.assert_array_equal(mission.true_swing(trace.columns)[0], true)
+    drawn: list[np.ndarray] = []
+    monkeypatch.setattr(
+        plots,
+        "save_figure",
+        lambda fig, path, **kw: drawn.extend(line.get_ydata() for line in fig.axes[1].lines),
+    )
+    plots.plot_case(tmp_path / "case.png", "imu", {"mpc": trace}, "n")
+    np.testing.assert_allclose(drawn[0], np.degrees(true))

@@ -82,14 +82,20 @@ def _settle(t: np.ndarray, err: np.ndarray, band: float, t0: float) -> float:
     return float(t[last + 1] - t0)
 
 
+def swing_column(trace, axis: str) -> str:
+    """The column a flight's swing along ``axis`` (``n`` or ``e``) is judged and shown by:
+    the simulator's true angle where the trace logs it (a flight on the IMU's estimate, or
+    with a noisy sensor), else the measured swing."""
+    cols = getattr(trace, "columns", trace)
+    return f"swing_true_{axis}" if "swing_true_n" in cols else f"swing_{axis}"
+
+
 def _step_window(trace, t0: float, axis: str, t_end: float | None):
     """Time, the step window mask and the swing columns (true swing when logged)."""
     t = _col(trace, "t")
     if axis not in ("n", "e", "ne"):
         raise DataError(f"axis must be 'n', 'e' or 'ne' (got {axis!r})")
-    cols = getattr(trace, "columns", trace)
-    swing_name = "swing_true_{}" if "swing_true_n" in cols else "swing_{}"
-    sn, se = _col(trace, swing_name.format("n")), _col(trace, swing_name.format("e"))
+    sn, se = _col(trace, swing_column(trace, "n")), _col(trace, swing_column(trace, "e"))
     end = float(t[-1]) if t_end is None else t_end
     win = (t >= t0) & (t <= end + 1e-9)
     if win.sum() < 10:

@@ -26,6 +26,7 @@ import numpy as np
 
 from swingrt import _core
 from swingrt.errors import ConfigError
+from swingrt.metrics import swing_column
 from swingrt.scenario import ScenarioLike, resolve
 
 #: Swing below which the payload counts as settled [deg].
@@ -84,8 +85,7 @@ def load(path: str) -> _core.Mission:
 def true_swing(trace: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     """The cable's true angles (North, East) [rad] of a flight: the simulator's truth where
     the trace has it, else the measured swing."""
-    sn = trace.get("swing_true_n", trace["swing_n"])
-    se = trace.get("swing_true_e", trace["swing_e"])
+    sn, se = (trace[swing_column(trace, a)] for a in ("n", "e"))
     return np.asarray(sn, dtype=float), np.asarray(se, dtype=float)
 
 

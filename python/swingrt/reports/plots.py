@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from swingrt.io.atomic import atomic_path
+from swingrt.metrics import swing_column
 
 if TYPE_CHECKING:
     from swingrt.io.flight import Trace
@@ -131,7 +132,7 @@ def plot_case(
             color, label = _STYLE.get(ctrl, (None, ctrl))
             t = tr.t
             ax[0, j].plot(t, tr[f"v{a}"], color=color, label=label)
-            ax[1, j].plot(t, np.degrees(tr[f"swing_{a}"]), color=color, label=label)
+            ax[1, j].plot(t, np.degrees(tr[swing_column(tr, a)]), color=color, label=label)
             ax[2, j].plot(t, tr[f"acc_sp_{a}"], color=color, label=label)
         some = next(iter(traces.values()))
         ax[0, j].plot(some.t, some[f"vel_sp_{a}"], "k--", lw=0.8, label="setpoint")
