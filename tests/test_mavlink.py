@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from swingrt.errors import LinkError
+from swingrt.errors import ConfigError, LinkError
 from swingrt.mavlink import link
 from swingrt.mavlink.link import (
     PX4_MAIN_MODE,
@@ -230,6 +230,12 @@ def test_px4_custom_mode_encoding():
     assert px4_custom_mode(4, 3) == int.from_bytes(raw, "little") == 0x03040000
     assert decode_px4_mode(px4_custom_mode(6, 0)) == (6, 0)
     assert link.mode_name(4, 3) == "AUTO.LOITER"
+
+
+def test_a_link_of_an_unknown_role_is_refused_before_any_socket_opens():
+    with pytest.raises(ConfigError, match="role: must be 'node' or 'vehicle'") as err:
+        link.connect("udpin:127.0.0.1:0", role="autopilot")
+    assert err.value.field == "role"
 
 
 def _sp(mask, x=0.0, y=0.0, z=0.0, vx=0.0, vy=0.0, vz=0.0, ax=0.0, ay=0.0, az=0.0, frame=1):

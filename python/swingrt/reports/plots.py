@@ -137,7 +137,7 @@ def plot_case(
         some = next(iter(traces.values()))
         ax[0, j].plot(some.t, some[f"vel_sp_{a}"], "k--", lw=0.8, label="setpoint")
         ax[0, j].set_ylabel(f"v_{a.upper()} [m/s]")
-        ax[1, j].set_ylabel(f"swing_{a} [deg]")
+        ax[1, j].set_ylabel(f"{swing_column(some, a)} [deg]")
         ax[2, j].set_ylabel(f"acc_sp_{a} [m/s²]")
         ax[2, j].set_xlabel("t [s]")
         for k in range(3):
