@@ -401,3 +401,13 @@ def test_a_flight_on_the_imu_is_judged_and_plotted_on_its_true_swing(monkeypatch
     )
     plots.plot_case(tmp_path / "case.png", "imu", {"mpc": trace}, "n")
     np.testing.assert_allclose(drawn[0], np.degrees(true))
+    # The prediction is compared with the swing the model flies on: the IMU's estimate.
+    trace["swing_est_n"] = 0.8 * true
+    trace["swing_est_e"] = 0 * t
+    model = type("Model", (), {"inputs": ["acc_sp_n"], "dt": 0.01})()
+    outs = np.zeros((50, 1, 3))
+    outs[:, 0, 2] = 0.8 * true[301:351]
+    drawn.clear()
+    plots.plot_prediction(tmp_path / "p.png", {"t0": 3.0, "outputs": outs.ravel()}, trace, model)
+    mask = (t >= 3.0) & (t <= 3.5 + 1e-9)
+    np.testing.assert_allclose(drawn[0], np.degrees(0.8 * true[mask]))

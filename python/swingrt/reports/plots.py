@@ -22,6 +22,7 @@ import numpy as np
 
 from swingrt.io.atomic import atomic_path
 from swingrt.metrics import swing_column
+from swingrt.sysid import swing_source
 
 if TYPE_CHECKING:
     from swingrt.io.flight import Trace
@@ -167,9 +168,11 @@ def plot_prediction(
     ax[0].plot(flown.t[mask], flown["vn"][mask], "k", label="flown")
     ax[0].plot(tp, pred[:, 0, 0], "tab:red", ls="--", label="MPC prediction")
     ax[0].set_ylabel("v_N [m/s]")
-    ax[1].plot(flown.t[mask], np.degrees(flown["swing_n"][mask]), "k", label="flown")
+    # The model predicts the swing it flies on: on the IMU, the estimate.
+    swing = "swing_est_n" if swing_source(flown) == "imu" else "swing_n"
+    ax[1].plot(flown.t[mask], np.degrees(flown[swing][mask]), "k", label="flown")
     ax[1].plot(tp, np.degrees(pred[:, 0, 2]), "tab:red", ls="--", label="MPC prediction")
-    ax[1].set_ylabel("swing_n [deg]")
+    ax[1].set_ylabel(f"{swing} [deg]")
     ax[1].set_xlabel("t [s]")
     for a in ax:
         a.grid(alpha=0.3)
