@@ -9,6 +9,7 @@ processes never share pytest's.
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import os
@@ -415,6 +416,41 @@ def test_rerun_replays_one_sample_with_traces(cli, reference):
     d = out / "rerun" / "sample-000003"
     for f in ("training.parquet", "pid.parquet", "mpc.parquet", "sample.png", "model.json"):
         assert (d / f).is_file()
+
+
+def test_rerun_draws_fly_the_campaigns_flight_then_other_noise(cli, reference):
+    _, out = reference
+    r = cli("campaign", "--rerun", out, "3", "--draws", "3")
+    assert r.returncode == 0, r.stderr
+    with open(out / "rerun" / "sample-000003" / "draws.csv", encoding="utf-8") as f:
+        draws = list(csv.DictReader(f))
+    assert sorted({int(d["draw"]) for d in draws}) == [0, 1, 2]
+    stored = {r["controller"]: r for r in read_rows(out) if r["sample"] == 3}
+    excess = {}
+    for ctrl, row in stored.items():
+        mine = sorted((d for d in draws if d["controller"] == ctrl), key=lambda d: d["draw"])
+        assert len(mine) == 3
+        # Draw 0 is the campaign's own flight.
+        for m in ("swing_excess_iae_deg_s", "ss_error", "v_settle_s"):
+            assert float(mine[0][m]) == pytest.approx(row[m], rel=1e-6), (ctrl, m)
+        n_failed = sum(bool(d["failure"]) for d in mine)
+        assert f"sample 3 {ctrl:4s} fails {n_failed} of 3 noise draws" in r.stdout
+        excess[ctrl] = [float(d["swing_excess_iae_deg_s"]) for d in mine]
+    # The sample's swing sensor is noisy: the MPC, which reads it, flies each draw its own
+    # way; PX4 PID never reads it and flies them alike.
+    assert len({round(x, 9) for x in excess["mpc"]}) == 3
+    assert max(excess["pid"]) - min(excess["pid"]) < 1e-9
+
+
+def test_draws_are_refused_below_one_or_without_a_rerun(cli, reference):
+    spec, out = reference
+    for args, named in (
+        (["--rerun", out, "3", "--draws", "0"], "--draws: must be >= 1 (got 0)"),
+        ([spec, "--out", out, "--draws", "2"], "--draws: only with --rerun DIR INDEX"),
+    ):
+        r = cli("campaign", *args)
+        assert r.returncode == 2
+        assert named in r.stderr and r.stderr.count("\n") == 1
 
 
 def test_hand_started_scheduler_gives_the_same_rows(cli, reference, tmp_path):

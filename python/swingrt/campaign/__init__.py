@@ -10,7 +10,13 @@ is (:mod:`swingrt.campaign.flight`), on an embedded Dask cluster or an existing 
 
 from __future__ import annotations
 
-from swingrt.campaign.flight import failure_reason, fly_batch, fly_sample, metric_columns
+from swingrt.campaign.flight import (
+    failure_reason,
+    fly_batch,
+    fly_noise_draws,
+    fly_sample,
+    metric_columns,
+)
 from swingrt.campaign.results import read_results, read_rows
 from swingrt.campaign.runner import run_campaign
 from swingrt.campaign.spec import CampaignSpec, load_spec, parse_spec
@@ -19,6 +25,7 @@ __all__ = [
     "CampaignSpec",
     "failure_reason",
     "fly_batch",
+    "fly_noise_draws",
     "fly_sample",
     "load_spec",
     "metric_columns",

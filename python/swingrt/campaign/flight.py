@@ -28,12 +28,13 @@ swing (:func:`swingrt.mission.shaped_legs`); the rows carry the mission's summar
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from swingrt.errors import IdentificationError
+from swingrt.errors import ConfigError, IdentificationError
 from swingrt.methods import METHODS
 from swingrt.metrics import METRICS, step_metrics
 
@@ -133,16 +134,34 @@ def failure_reason(row: dict[str, Any]) -> str:
     return ""
 
 
-def fly_sample(
-    raw: dict[str, Any], index: int, out: Path | None = None
-) -> tuple[list[dict[str, Any]], dict[str, Any]]:
-    """Fly sample ``index`` of the spec ``raw``; returns one row per controller and, with
-    ``out``, writes the traces, models and figures there (``--rerun``)."""
+@dataclass
+class _Prepared:
+    """A sample made ready to fly its evaluation: drawn, trained and identified (or the
+    error that stopped it)."""
+
+    spec: Any
+    index: int
+    common: dict[str, Any]
+    ident: dict[str, Any]
+    exp: Any = None
+    plan: Any = None
+    train_sc: Any = None
+    train: Any = None
+    model: Any = None
+    lqr: Any = None
+    trained: dict[str, Any] = field(default_factory=dict)
+    setup_error: str = ""
+    ident_error: str = ""
+    method_errors: dict[str, str] = field(default_factory=dict)
+
+
+def _prepare(raw: dict[str, Any], index: int, out: Path | None) -> _Prepared:
+    """Draw sample ``index``, fly its training flight and identify it; with ``out``, write
+    the training trace and the models there."""
     from swingrt.campaign.spec import parse_spec
     from swingrt.experiments import (
         evaluation_scenario,
         identify_case,
-        simulate_controller,
         train_methods,
         training_scenario,
         without_whitebox,
@@ -152,84 +171,101 @@ def fly_sample(
     spec = parse_spec(raw)
     values = spec.draw(index)
     seed = spec.flight_seed(index)
-    common: dict[str, Any] = {"sample": index, "flight_seed": seed, **param_columns(values)}
-    ident: dict[str, Any] = {c: None for c in IDENT_COLUMNS}
-    nan_metrics = {m: math.nan for m in metric_columns(spec.is_mission)}
-    plan = None
-    traces: dict[str, Any] = {}
-    setup_error = ident_error = ""
-    model = lqr = None
-    trained: dict[str, Any] = {}
+    s = _Prepared(
+        spec,
+        index,
+        {"sample": index, "flight_seed": seed, **param_columns(values)},
+        {c: None for c in IDENT_COLUMNS},
+    )
     try:
-        exp = spec.experiment(values, label=f"{spec.name} #{index}")
-        plan = spec.mission(values, index)
-        axis = "ne" if exp.axes == "ne" else "n"
-        train_sc = training_scenario(exp, {}, seed)
-        ev_sc = evaluation_scenario(exp, {}, seed + 1, train_sc)
+        s.exp = spec.experiment(values, label=f"{spec.name} #{index}")
+        s.plan = spec.mission(values, index)
+        s.train_sc = training_scenario(s.exp, {}, seed)
+        # A broken evaluation stops the sample before it trains, as a broken training does.
+        evaluation_scenario(s.exp, {}, seed + 1, s.train_sc)
     except BaseException as exc:  # a broken sample is a result, not a crash
         if _fatal(exc):
             raise
-        setup_error = f"{type(exc).__name__}: {exc}"
-    if not setup_error:
+        s.setup_error = f"{type(exc).__name__}: {exc}"
+        return s
+    try:
+        s.train = _run(s.train_sc, False, "collect")
+        plots = None if out is None else out / "error_vs_delays.png"
+        s.model, wb, s.lqr = identify_case(s.train, s.exp, plots, vehicle=s.train_sc)
+        cc = s.model.diagnostics.get("control_check")
+        s.ident = {
+            "q": int(s.model.delays),
+            "p": int(s.model.rank),
+            "test_nmae": float(s.model.diagnostics.get("test_nmae", math.nan)),
+            "control_check_passed": None if cc is None else bool(cc.get("passed", True)),
+            "wb_payload_mass": None if s.lqr is None else s.lqr["m_p"],
+            "wb_length": None if s.lqr is None else s.lqr["l"],
+            "wb_attitude_lag": None if wb is None else _attitude_lag(wb),
+        }
+        if out is not None:
+            s.train.to_parquet(out / "training.parquet")
+            s.model.save(out / "model.json")
+            if wb is not None:
+                wb.save(out / "whitebox.json")
+    except BaseException as exc:  # PID still flies without a model
+        if _fatal(exc):
+            raise
+        s.ident_error = f"{type(exc).__name__}: {exc}"
+        return s
+    # Without a white-box estimate the LQR and the methods trained on it do not fly; their
+    # rows say why and the rest fly as usual.
+    s.method_errors.update(without_whitebox(s.exp, s.model, s.lqr))
+    for ctrl in spec.controllers:
+        if ctrl not in METHODS or ctrl in s.method_errors:
+            continue
         try:
-            train = _run(train_sc, False, "collect")
-            plots = None if out is None else out / "error_vs_delays.png"
-            model, wb, lqr = identify_case(train, exp, plots, vehicle=train_sc)
-            cc = model.diagnostics.get("control_check")
-            ident = {
-                "q": int(model.delays),
-                "p": int(model.rank),
-                "test_nmae": float(model.diagnostics.get("test_nmae", math.nan)),
-                "control_check_passed": None if cc is None else bool(cc.get("passed", True)),
-                "wb_payload_mass": None if lqr is None else lqr["m_p"],
-                "wb_length": None if lqr is None else lqr["l"],
-                "wb_attitude_lag": None if wb is None else _attitude_lag(wb),
-            }
-            if out is not None:
-                train.to_parquet(out / "training.parquet")
-                model.save(out / "model.json")
-                if wb is not None:
-                    wb.save(out / "whitebox.json")
-        except BaseException as exc:  # PID still flies without a model
+            s.trained.update(
+                train_methods(s.train, s.exp.with_controllers([ctrl]), s.model, s.lqr, s.train_sc)
+            )
+        except BaseException as exc:  # one method failing to train is its row's error
             if _fatal(exc):
                 raise
-            ident_error = f"{type(exc).__name__}: {exc}"
-    method_errors: dict[str, str] = {}
-    if not setup_error and not ident_error:
-        # Without a white-box estimate the LQR and the methods trained on it do not fly;
-        # their rows say why and the rest fly as usual.
-        method_errors.update(without_whitebox(exp, model, lqr))
-        for ctrl in spec.controllers:
-            if ctrl not in METHODS or ctrl in method_errors:
-                continue
-            try:
-                trained.update(
-                    train_methods(train, exp.with_controllers([ctrl]), model, lqr, train_sc)
-                )
-            except BaseException as exc:  # one method failing to train is its row's error
-                if _fatal(exc):
-                    raise
-                method_errors[ctrl] = f"{type(exc).__name__}: {exc}"
+            s.method_errors[ctrl] = f"{type(exc).__name__}: {exc}"
+    return s
+
+
+def _fly_evaluation(
+    s: _Prepared, seed: int, traces: dict[str, Any], out: Path | None
+) -> list[dict[str, Any]]:
+    """Every controller of the sample on its evaluation flight with noise seed ``seed``,
+    judged against PX4 PID's flight of the same seed; one row per controller."""
+    from swingrt.experiments import evaluation_scenario, simulate_controller
+
+    nan_metrics = {m: math.nan for m in metric_columns(s.spec.is_mission)}
+    ev_sc = None
+    setup_error = s.setup_error
+    if not setup_error:
+        try:
+            ev_sc = evaluation_scenario(s.exp, {}, seed, s.train_sc)
+        except BaseException as exc:  # as in _prepare
+            if _fatal(exc):
+                raise
+            setup_error = f"{type(exc).__name__}: {exc}"
     rows = []
-    for ctrl in spec.controllers:
+    for ctrl in s.spec.controllers:
         row: dict[str, Any] = {
-            **common,
+            **s.common,
             "controller": ctrl,
-            **ident,
+            **s.ident,
             "fallback": "",
             "error": "",
             "training_s": math.nan,
         }
         blocked = (
-            setup_error or (ident_error if ctrl != "pid" else "") or method_errors.get(ctrl, "")
+            setup_error or (s.ident_error if ctrl != "pid" else "") or s.method_errors.get(ctrl, "")
         )
         if blocked:
             rows.append({**row, **nan_metrics, "error": blocked})
             continue
-        if plan is not None:
-            tracking = {"mpc": exp.mpc} if exp.mpc else None
+        if s.plan is not None:
+            tracking = {"mpc": s.exp.mpc} if s.exp.mpc else None
             row.update(
-                _fly_mission(plan, ctrl, ev_sc, seed + 1, (model, lqr), tracking, traces, out)
+                _fly_mission(s.plan, ctrl, ev_sc, seed, (s.model, s.lqr), tracking, traces, out)
             )
             rows.append(row)
             continue
@@ -237,18 +273,19 @@ def fly_sample(
             trace, extras = simulate_controller(
                 ev_sc,
                 ctrl,
-                axes=exp.axes,
-                model=model,
-                lqr_params=lqr,
-                mpc_settings=exp.mpc or None,
-                lqr_settings=exp.lqr or None,
-                method=trained.get(ctrl),
-                budget=exp.tick_budget,
+                axes=s.exp.axes,
+                model=s.model,
+                lqr_params=s.lqr,
+                mpc_settings=s.exp.mpc or None,
+                lqr_settings=s.exp.lqr or None,
+                method=s.trained.get(ctrl),
+                budget=s.exp.tick_budget,
             )
-            m = step_metrics(trace, t0=exp.step["t"], axis=axis)
+            axis = "ne" if s.exp.axes == "ne" else "n"
+            m = step_metrics(trace, t0=s.exp.step["t"], axis=axis)
             row.update({c: float(m.get(c, math.nan)) for c in METRICS})
             row["fallback"] = str(extras.get("fallback") or "")
-            row["training_s"] = _training_seconds(ctrl, trained, train)
+            row["training_s"] = _training_seconds(ctrl, s.trained, s.train)
             traces[ctrl] = trace
             if out is not None:
                 trace.to_parquet(out / f"{ctrl}.parquet")
@@ -259,14 +296,38 @@ def fly_sample(
             row["error"] = f"{type(exc).__name__}: {exc}"
         rows.append(row)
     pid = next((r for r in rows if r["controller"] == "pid"), None)
-    if plan is not None:
+    if s.plan is not None:
         _judge_missions(rows, pid)
-        return rows, traces
+        return rows
     for row in rows:
         ref = math.nan if pid is None else pid.get(EXCESS, math.nan)
         row[RATIO] = row[EXCESS] / ref if ref and ref > 0 else math.nan
         row["failure"] = failure_reason(row)
+    return rows
+
+
+def fly_sample(
+    raw: dict[str, Any], index: int, out: Path | None = None
+) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """Fly sample ``index`` of the spec ``raw``; returns one row per controller and, with
+    ``out``, writes the traces, models and figures there (``--rerun``)."""
+    s = _prepare(raw, index, out)
+    traces: dict[str, Any] = {}
+    rows = _fly_evaluation(s, s.common["flight_seed"] + 1, traces, out)
     return rows, traces
+
+
+def fly_noise_draws(raw: dict[str, Any], index: int, draws: int) -> list[list[dict[str, Any]]]:
+    """Sample ``index`` trained and identified once, its evaluation flown on ``draws`` noise
+    realisations (:meth:`~swingrt.campaign.spec.CampaignSpec.noise_seed`; draw 0 is the campaign's
+    own flight): the rows of each draw, every controller judged against PX4 PID's flight of
+    the same draw. Everything the spec draws (payload, wind, gust, noise levels) and the
+    identified model stay; only the sensors' noise and the vibration's phase change. Tells a
+    failure that is a coin at its bound from one the sample forces (``--rerun --draws``)."""
+    if draws < 1:
+        raise ConfigError(f"--draws: must be >= 1 (got {draws})", field="draws")
+    s = _prepare(raw, index, None)
+    return [_fly_evaluation(s, s.spec.noise_seed(index, k), {}, None) for k in range(draws)]
 
 
 def _fly_mission(

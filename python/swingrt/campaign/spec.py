@@ -164,6 +164,16 @@ class CampaignSpec:
 
         return int(np.random.default_rng([self.seed, index, 1]).integers(0, 2**31 - 1))
 
+    def noise_seed(self, index: int, draw: int) -> int:
+        """The evaluation flight's seed of sample ``index`` on noise draw ``draw``: draw 0 is
+        the campaign's own (``flight_seed + 1``), the others independent streams of the
+        campaign's seed (``swingrt campaign --rerun DIR INDEX --draws N``)."""
+        import numpy as np
+
+        if draw == 0:
+            return self.flight_seed(index) + 1
+        return int(np.random.default_rng([self.seed, index, 2, draw]).integers(0, 2**31 - 1))
+
 
 def _target(key: str) -> tuple[str, list[str]]:
     """(section of the experiment dict, path inside it) a dotted ``[vary]`` key sets."""

@@ -29,11 +29,44 @@ def add_parser(sub) -> argparse.ArgumentParser:
         metavar=("DIR", "INDEX"),
         help="replay sample INDEX of the campaign in DIR with its traces and figures",
     )
+    p.add_argument(
+        "--draws",
+        type=int,
+        metavar="N",
+        help="with --rerun: also fly the sample's evaluation on N noise realisations (draw 0 "
+        "the campaign's own) and say how often each controller fails (draws.csv)",
+    )
     p.add_argument("--no-report", action="store_true", help="skip writing report.md")
     return p
 
 
-def _rerun(folder: str, index_text: str) -> int:
+def _noise_draws(raw: dict, index: int, draws: int, out: Path, mission: bool) -> None:
+    """Fly the sample's evaluation on ``draws`` noise realisations; print each controller's
+    failures among them and its swing ratio's spread, and write ``draws.csv``."""
+    from swingrt.campaign.flight import RATIO, fly_noise_draws
+    from swingrt.io.atomic import write_text_atomic
+    from swingrt.reports.tables import csv_text
+
+    flown = fly_noise_draws(raw, index, draws)
+    rows = [{"draw": k, **r} for k, draw in enumerate(flown) for r in draw]
+    write_text_atomic(out / "draws.csv", csv_text(rows, list(rows[0])))
+    for ctrl in dict.fromkeys(r["controller"] for r in rows):
+        mine = [r for r in rows if r["controller"] == ctrl]
+        why = [r["failure"] for r in mine if r["failure"]]
+        reasons = ", ".join(f"{w} {why.count(w)}" for w in dict.fromkeys(why))
+        line = f"sample {index} {ctrl:4s} fails {len(why)} of {draws} noise draws"
+        line += f" ({reasons})" if why else ""
+        ratios = [r[RATIO] for r in mine if not mission and not math.isnan(r.get(RATIO, math.nan))]
+        if ratios and ctrl != "pid":
+            q = sorted(ratios)
+            line += (
+                f"; swing excess vs PID median {q[len(q) // 2]:.3g}, range {q[0]:.3g}-{q[-1]:.3g}"
+            )
+        print(line)
+    print(f"wrote {out}/draws.csv")
+
+
+def _rerun(folder: str, index_text: str, draws: int | None = None) -> int:
     from swingrt.campaign.flight import fly_sample, metric_columns
     from swingrt.campaign.results import read_rows, stored_spec
     from swingrt.campaign.spec import parse_spec
@@ -48,6 +81,8 @@ def _rerun(folder: str, index_text: str) -> int:
     spec = parse_spec(raw, f"{folder}/campaign.json")
     if not 0 <= index < spec.samples:
         raise ConfigError(f"--rerun: INDEX must be in 0..{spec.samples - 1} (got {index})")
+    if draws is not None and draws < 1:
+        raise ConfigError(f"--draws: must be >= 1 (got {draws})")
     out = Path(folder) / "rerun" / f"sample-{index:06d}"
     out.mkdir(parents=True, exist_ok=True)
     rows, traces = fly_sample(raw, index, out)
@@ -78,6 +113,8 @@ def _rerun(folder: str, index_text: str) -> int:
             )
             print(f"  {'matches' if same else 'DIFFERS FROM'} the dataset's row")
     print(f"wrote {out}/")
+    if draws is not None:
+        _noise_draws(raw, index, draws, out, spec.is_mission)
     return 0
 
 
@@ -88,7 +125,9 @@ def run(args) -> int:
     if args.rerun:
         if args.spec:
             raise ConfigError("--rerun DIR INDEX takes no SPEC (the folder holds it)")
-        return _rerun(*args.rerun)
+        return _rerun(*args.rerun, draws=args.draws)
+    if args.draws is not None:
+        raise ConfigError("--draws: only with --rerun DIR INDEX")
     if not args.spec:
         raise ConfigError("campaign: give SPEC.toml (or --rerun DIR INDEX)")
     if args.workers is not None and args.workers < 1:
