@@ -311,23 +311,32 @@ def fly_sample(
 ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Fly sample ``index`` of the spec ``raw``; returns one row per controller and, with
     ``out``, writes the traces, models and figures there (``--rerun``)."""
-    s = _prepare(raw, index, out)
-    traces: dict[str, Any] = {}
-    rows = _fly_evaluation(s, s.common["flight_seed"] + 1, traces, out)
-    return rows, traces
+    flown, traces = fly_noise_draws(raw, index, 1, out)
+    return flown[0], traces
 
 
-def fly_noise_draws(raw: dict[str, Any], index: int, draws: int) -> list[list[dict[str, Any]]]:
+def fly_noise_draws(
+    raw: dict[str, Any], index: int, draws: int, out: Path | None = None
+) -> tuple[list[list[dict[str, Any]]], dict[str, Any]]:
     """Sample ``index`` trained and identified once, its evaluation flown on ``draws`` noise
-    realisations (:meth:`~swingrt.campaign.spec.CampaignSpec.noise_seed`; draw 0 is the campaign's
-    own flight): the rows of each draw, every controller judged against PX4 PID's flight of
-    the same draw. Everything the spec draws (payload, wind, gust, noise levels) and the
-    identified model stay; only the sensors' noise and the vibration's phase change. Tells a
-    failure that is a coin at its bound from one the sample forces (``--rerun --draws``)."""
+    realisations (:meth:`~swingrt.campaign.spec.CampaignSpec.noise_seed`; draw 0 is the
+    campaign's own flight): the rows of each draw, every controller judged against PX4
+    PID's flight of the same draw, and draw 0's traces (with ``out``, written there with the
+    training flight and the models, as :func:`fly_sample` does). Everything the spec draws
+    (payload, wind, gust, noise levels) and the identified model stay; only the sensors'
+    noise and the vibration's phase change. Tells a failure that is a coin at its bound
+    from one the sample forces (``--rerun --draws``)."""
     if draws < 1:
         raise ConfigError(f"--draws: must be >= 1 (got {draws})", field="draws")
-    s = _prepare(raw, index, None)
-    return [_fly_evaluation(s, s.spec.noise_seed(index, k), {}, None) for k in range(draws)]
+    s = _prepare(raw, index, out)
+    traces: dict[str, Any] = {}
+    flown = [
+        _fly_evaluation(
+            s, s.spec.noise_seed(index, k), traces if k == 0 else {}, out if k == 0 else None
+        )
+        for k in range(draws)
+    ]
+    return flown, traces
 
 
 def _fly_mission(

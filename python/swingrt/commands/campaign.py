@@ -40,14 +40,14 @@ def add_parser(sub) -> argparse.ArgumentParser:
     return p
 
 
-def _noise_draws(raw: dict, index: int, draws: int, out: Path, mission: bool) -> None:
-    """Fly the sample's evaluation on ``draws`` noise realisations; print each controller's
-    failures among them and its swing ratio's spread, and write ``draws.csv``."""
-    from swingrt.campaign.flight import RATIO, fly_noise_draws
+def _report_draws(flown: list[list[dict]], index: int, out: Path, mission: bool) -> None:
+    """Print each controller's failures among the noise draws ``flown`` and its swing
+    ratio's spread; write ``draws.csv``."""
+    from swingrt.campaign.flight import RATIO
     from swingrt.io.atomic import write_text_atomic
     from swingrt.reports.tables import csv_text
 
-    flown = fly_noise_draws(raw, index, draws)
+    draws = len(flown)
     rows = [{"draw": k, **r} for k, draw in enumerate(flown) for r in draw]
     write_text_atomic(out / "draws.csv", csv_text(rows, list(rows[0])))
     for ctrl in dict.fromkeys(r["controller"] for r in rows):
@@ -67,7 +67,7 @@ def _noise_draws(raw: dict, index: int, draws: int, out: Path, mission: bool) ->
 
 
 def _rerun(folder: str, index_text: str, draws: int | None = None) -> int:
-    from swingrt.campaign.flight import fly_sample, metric_columns
+    from swingrt.campaign.flight import fly_noise_draws, metric_columns
     from swingrt.campaign.results import read_rows, stored_spec
     from swingrt.campaign.spec import parse_spec
     from swingrt.errors import ConfigError
@@ -85,7 +85,8 @@ def _rerun(folder: str, index_text: str, draws: int | None = None) -> int:
         raise ConfigError(f"--draws: must be >= 1 (got {draws})")
     out = Path(folder) / "rerun" / f"sample-{index:06d}"
     out.mkdir(parents=True, exist_ok=True)
-    rows, traces = fly_sample(raw, index, out)
+    flown, traces = fly_noise_draws(raw, index, draws or 1, out)
+    rows = flown[0]
     exp_axes = spec.base.get("axes", "n")
     plan = spec.mission(spec.draw(index), index)
     if traces and plan is not None:
@@ -114,7 +115,7 @@ def _rerun(folder: str, index_text: str, draws: int | None = None) -> int:
             print(f"  {'matches' if same else 'DIFFERS FROM'} the dataset's row")
     print(f"wrote {out}/")
     if draws is not None:
-        _noise_draws(raw, index, draws, out, spec.is_mission)
+        _report_draws(flown, index, out, spec.is_mission)
     return 0
 
 
