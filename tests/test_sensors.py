@@ -263,6 +263,29 @@ def test_the_imu_swings_scale_is_measured_from_the_flight_not_assumed_from_a_mas
     assert trace.meta["scenario"]["sensors"]["estimator"]["scale"] == d["scale"]
 
 
+def test_the_white_box_of_an_imu_flight_has_the_cables_length_whatever_the_payload():
+    # The estimate flown for a payload heavier than the estimator assumes is the angle plus
+    # a share of the tilt: the pendulum that answers the motion as that estimate does is
+    # too short. The white-box takes the length the scale fit measured, and says what the
+    # swing's own fit gave. The independent reference is the simulated cable.
+    from swingrt.sysid import identify
+
+    for mass, length in ((0.45, 1.5), (0.08, 0.6)):
+        over = {"sensors": {"swing": "imu"}, "payload": {"mass": mass, "length": length}}
+        flight = swingrt.collect(over, duration=300.0, seed=2)
+        wb = identify(flight, method="whitebox", payload_mass=mass)
+        est = wb.diagnostics["whitebox"]
+        why = wb.diagnostics["whitebox_length"]
+        assert why["source"] == "imu_scale_fit" and why["length"] == est["length"]
+        assert abs(est["length"] / length - 1.0) < 0.02, (mass, est["length"])
+        if mass > 0.3:
+            assert why["swing_fit_length"] / length < 0.9, why  # what it would have been
+        # Told the length, the white-box keeps it.
+        given = identify(flight, method="whitebox", payload_mass=mass, cable_length=0.7)
+        assert given.diagnostics["whitebox"]["length"] == 0.7
+        assert "whitebox_length" not in given.diagnostics
+
+
 def test_the_pendulum_observer_reads_drag_as_drag_online_as_offline():
     # A light payload (0.1 kg under 0.952 kg) in a 2 m/s wind: the drag the IMU reads,
     # scaled by the small pull, is larger than the swing. The calibrated estimator's
