@@ -9,8 +9,9 @@ z_k = [x_k; x_{k-1}; ...; x_{k-q+1}] (newest first):
 * ``havokc``  HAVOKc (eq. 4.16-4.23) with the structural 0/1 entries forced (figure 4.4);
 * ``whitebox`` the linearised pendulum (eq. 5.7, stable sign) with the cable length of the
   single pendulum that answers the vehicle's motion as the swing does (the FFT peak of
-  eq. 4.8 when that fit fails; both in ``diagnostics['whitebox']``) and the payload mass
-  from RLS on hover thrust (section 4.3.2).
+  eq. 4.8 when that fit fails; both in ``diagnostics['whitebox']``; on the IMU's swing,
+  the length its scale fit measured, ``diagnostics['whitebox_length']``) and the payload
+  mass from RLS on hover thrust (section 4.3.2).
 
 Every rule of identification lives in the Rust core: the settings with their defaults and
 checks (``_core.identify_settings``: the keyword arguments below are its fields), the
