@@ -269,6 +269,7 @@ def _fly_evaluation(
             )
             rows.append(row)
             continue
+        assert ev_sc is not None  # a failed evaluation setup blocked every row above
         try:
             trace, extras = simulate_controller(
                 ev_sc,

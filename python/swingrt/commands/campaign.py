@@ -126,7 +126,8 @@ def run(args) -> int:
     if args.rerun:
         if args.spec:
             raise ConfigError("--rerun DIR INDEX takes no SPEC (the folder holds it)")
-        return _rerun(*args.rerun, draws=args.draws)
+        folder, index = args.rerun
+        return _rerun(folder, index, draws=args.draws)
     if args.draws is not None:
         raise ConfigError("--draws: only with --rerun DIR INDEX")
     if not args.spec:
