@@ -322,13 +322,15 @@ def fly_noise_draws(
     """Sample ``index`` trained and identified once, its evaluation flown on ``draws`` noise
     realisations (:meth:`~swingrt.campaign.spec.CampaignSpec.noise_seed`; draw 0 is the
     campaign's own flight): the rows of each draw, every controller judged against PX4
-    PID's flight of the same draw, and draw 0's traces (with ``out``, written there with the
-    training flight and the models, as :func:`fly_sample` does). Everything the spec draws
-    (payload, wind, gust, noise levels) and the identified model stay; only the sensors'
-    noise and the vibration's phase change. Tells a failure that is a coin at its bound
-    from one the sample forces (``--rerun --draws``)."""
+    PID's flight of the same draw, and draw 0's traces (with ``out``, a folder made if need
+    be, written there with the training flight and the models, as :func:`fly_sample` does).
+    Everything the spec draws (payload, wind, gust, noise levels) and the identified model
+    stay; only the sensors' noise and the vibration's phase change. Tells a failure that is
+    a coin at its bound from one the sample forces (``--rerun --draws``)."""
     if draws < 1:
         raise ConfigError(f"--draws: must be >= 1 (got {draws})", field="draws")
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
     s = _prepare(raw, index, out)
     traces: dict[str, Any] = {}
     flown = [

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import statistics
 from pathlib import Path
 
 
@@ -58,9 +59,9 @@ def _report_draws(flown: list[list[dict]], index: int, out: Path, mission: bool)
         line += f" ({reasons})" if why else ""
         ratios = [r[RATIO] for r in mine if not mission and not math.isnan(r.get(RATIO, math.nan))]
         if ratios and ctrl != "pid":
-            q = sorted(ratios)
             line += (
-                f"; swing excess vs PID median {q[len(q) // 2]:.3g}, range {q[0]:.3g}-{q[-1]:.3g}"
+                f"; swing excess vs PID median {statistics.median(ratios):.3g}, "
+                f"range {min(ratios):.3g}-{max(ratios):.3g}"
             )
         print(line)
     print(f"wrote {out}/draws.csv")
@@ -81,11 +82,8 @@ def _rerun(folder: str, index_text: str, draws: int | None = None) -> int:
     spec = parse_spec(raw, f"{folder}/campaign.json")
     if not 0 <= index < spec.samples:
         raise ConfigError(f"--rerun: INDEX must be in 0..{spec.samples - 1} (got {index})")
-    if draws is not None and draws < 1:
-        raise ConfigError(f"--draws: must be >= 1 (got {draws})")
     out = Path(folder) / "rerun" / f"sample-{index:06d}"
-    out.mkdir(parents=True, exist_ok=True)
-    flown, traces = fly_noise_draws(raw, index, draws or 1, out)
+    flown, traces = fly_noise_draws(raw, index, 1 if draws is None else draws, out)
     rows = flown[0]
     exp_axes = spec.base.get("axes", "n")
     plan = spec.mission(spec.draw(index), index)
