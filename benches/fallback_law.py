@@ -20,12 +20,12 @@ import argparse
 import math
 import statistics
 from collections import Counter
+from pathlib import Path
 from typing import Any
 
 from swingrt.campaign import read_rows
+from swingrt.campaign.flight import RATIO
 from swingrt.campaign.report import wilson
-
-RATIO = "swing_excess_vs_pid"
 
 
 def _line(name: str, rows: list[dict[str, Any]]) -> str:
@@ -46,6 +46,8 @@ def main() -> int:
     ap.add_argument("run", help="a campaign's output folder")
     ap.add_argument("--law", default="shaper", help="the controller flown where none passed")
     args = ap.parse_args()
+    if not (Path(args.run) / "results").is_dir():
+        raise SystemExit(f"{args.run}: not a campaign's output folder (no results/ in it)")
     by: dict[int, dict[str, dict[str, Any]]] = {}
     for r in read_rows(args.run):
         by.setdefault(int(r["sample"]), {})[r["controller"]] = r
