@@ -11,6 +11,11 @@ failures with their 95 % Wilson interval and the median swing excess over PX4's,
 whether the check passed and by the payload's kind, and every sample the rule changes
 (righted or broken).
 
+The selection now takes the ZVD shaper itself where no candidate's MPC passes and the shaper
+passes on the twin (``[selection] fallback``, the ``law`` column): a run that flew it has no
+counterfactual to read, so this reads runs flown with ``fallback = "none"`` (or before the
+rule) and refuses the others.
+
 Run:  python benches/fallback_law.py RUN [--law shaper]
 """
 
@@ -56,6 +61,12 @@ def main() -> int:
     ]
     if not pairs:
         raise SystemExit(f"{args.run}: no sample has both an mpc and a {args.law} row")
+    ruled = [i for i, m, _ in pairs if m.get("law") not in (None, "mpc")]
+    if ruled:
+        raise SystemExit(
+            f"{args.run}: its selection flew a fallback law already (samples {ruled[:5]}...); "
+            'fly the study with [selection] fallback = "none" to read the counterfactual'
+        )
     none = [(i, m, w) for i, m, w in pairs if m.get("control_check_passed") is False]
     rule = [w if m.get("control_check_passed") is False else m for _, m, w in pairs]
     print(f"{args.run}: {len(pairs)} samples, {len(none)} where no candidate passed the check")

@@ -106,6 +106,39 @@ def test_a_model_that_passed_no_closed_loop_check_warns_whoever_flies_it():
     assert text is not None and text.startswith("warning:") and pick in text
 
 
+def test_a_model_whose_selection_took_the_shaper_flies_it_wherever_it_is_loaded(tmp_path):
+    """The law a selection records (``control_check.law``) is what every path that builds a
+    controller from the model file builds: the offboard node's (``swingrt fly``, ``run
+    --px4``) the same shaper, impulse for impulse, as one made by hand for that mode; a
+    model that records none flies its MPC; a damaged record is refused by name."""
+    from swingrt.mavlink.offboard import load_controller
+
+    cols, _, _ = _linear_flight()
+    m = sysid.identify(cols, delays=1, offset="none", test_span=40.0)
+    mode = {"omega": 2.1, "zeta": 0.03}
+    law = {"kind": "shaper", "mode": mode, "settings": {"kind": "zvd", "period": 0.02}}
+    shaped = m.with_diagnostics({"control_check": {"passed": True, "law": law}})
+    shaped.save(tmp_path / "shaped.json")
+    ctrl, ts, axes = load_controller(tmp_path / "shaped.json")
+    assert (ctrl.kind, ctrl.output, ts, axes) == ("shaper", "velocity", 0.02, 1)
+    by_hand = _core.Controller.shaper(mode["omega"], mode["zeta"], 1, {"kind": "zvd"})
+    state = np.zeros((1, 3))
+    for c in (ctrl, by_hand):
+        c.reset(state)
+    out = [(ctrl.step(state, [1.0])[0], by_hand.step(state, [1.0])[0]) for _ in range(200)]
+    # ZVD's first impulse is 1 / (1 + K)² with K = exp(-ζπ / √(1 - ζ²)); the step ends whole.
+    k = math.exp(-mode["zeta"] * math.pi / math.sqrt(1 - mode["zeta"] ** 2))
+    assert all(a == b for a, b in out), out[:3]
+    assert math.isclose(out[0][0], 1 / (1 + k) ** 2) and math.isclose(out[-1][0], 1.0)
+    m.with_diagnostics({"control_check": {"passed": True}}).save(tmp_path / "mpc.json")
+    ctrl, ts, _ = load_controller(tmp_path / "mpc.json")
+    assert type(ctrl).__name__ == "Mpc" and ts == m.dt
+    bad = m.with_diagnostics({"control_check": {"passed": True, "law": {"kind": "pid"}}})
+    bad.save(tmp_path / "bad.json")
+    with pytest.raises(swingrt.errors.SwingrtError, match="control_check.law"):
+        load_controller(tmp_path / "bad.json")
+
+
 def test_affine_offset_learns_constant_and_mean_offset_subtracts_mean():
     c = np.array([0.02, -0.01])
     cols, a, b = _linear_flight(c=c, seed=3)
@@ -924,6 +957,37 @@ def test_the_twin_hold_flight_shows_an_oscillation_that_grows_too_slowly_for_the
     flown = {name: _fly(ev, sel.model) for name, sel in [("loose", loose), ("bound", picked)]}
     assert math.isinf(flown["loose"]["v_settle_s"]), flown["loose"]
     assert flown["bound"]["v_settle_s"] < 6.0 and flown["bound"]["ss_error"] < 0.02, flown
+
+
+def test_where_no_mpc_passes_on_the_imu_the_input_shaper_that_passes_on_the_twin_flies():
+    """robustness-imu seed 3, sample 132 (0.13 kg on 2.37 m, nothing on the cable: the swing
+    from the IMU): no candidate's MPC passes the check, and the MPC's pick leaves the vehicle
+    more than 0.4 of PX4's swing excess (a failure). The ZVD shaper of PX4's velocity setpoint
+    on the white-box pendulum passes the twin's flights; the selection records it and the
+    model's flight flies it, well within the bound and on the setpoint. The flight is the
+    study's own vehicle and payload, not the twin: the shaper was judged on an estimate."""
+    from swingrt.experiments.identification import identify_case
+
+    exp = _campaign_experiment(132, "robustness-imu", 3)
+    train, train_sc, ev = _campaign_sample(132, "robustness-imu", 3)
+    model, _, _ = identify_case(train, exp, vehicle=train_sc)
+    cc = model.diagnostics["control_check"]
+    assert cc["law"]["kind"] == "shaper" and cc["passed"], cc["law"]
+    mpcs = [c for c in cc["checked"] if c["law"] == "mpc"]
+    assert mpcs and not any(c["passed"] for c in mpcs)
+    shaper = cc["checked"][-1]
+    # Judged on the twin alone: no linear plant flies a law without feedback on the model.
+    assert shaper["law"] == "shaper" and shaper["passed"] and shaper["overshoot"] is None
+    assert shaper["payload_miss"] <= 1.0 and shaper["slow_vehicle_miss"] <= 1.0, shaper
+    # The mode shaped is the pendulum's under PX4's loop: near sqrt(g / l) of the cable.
+    omega = cc["law"]["mode"]["omega"]
+    assert abs(omega / math.sqrt(9.81 / 2.37) - 1.0) < 0.15, omega
+    pid = _fly(ev, controller="pid")["swing_excess_iae_deg_s"]
+    flown = _fly(ev, model)
+    without = model.with_diagnostics({"control_check": {**cc, "law": None}})
+    mpc = _fly(ev, without)
+    assert flown["swing_excess_iae_deg_s"] < 0.4 * pid and flown["ss_error"] < 0.02, flown
+    assert mpc["swing_excess_iae_deg_s"] >= 0.4 * pid, (mpc, pid)
 
 
 def test_the_twin_carries_the_second_link_found_in_the_swing():

@@ -676,6 +676,7 @@ def select_for_control(
     slow_motor_lag: float | None = None,
     slow_inertia: float | None = None,
     wander_sigmas: float | None = None,
+    fallback: str | None = None,
     check: tuple[LinearModel, str] | None = None,
     **settings: Any,
 ) -> SearchResult:
@@ -741,6 +742,11 @@ def select_for_control(
     time constant ``slow_motor_lag`` [s] (default 0.04, where slower than its own) and
     ``slow_inertia`` times its inertia (default 1.5), what the twin does not know of the
     attitude loop (``checked[*].slow_vehicle_miss``; 0 and 1 fly none).
+    When no candidate's MPC passes, the ``fallback`` law (default ``"zvd"``; ``"zv"``, or
+    ``"none"`` for none) flies the same twin flights: the input shaper of PX4's velocity
+    setpoint on the white-box pendulum (:mod:`swing_core::design::law`), judged like a
+    candidate but for the linear plants (it has no feedback on the model); when the rule
+    picks it, ``control_check['law']`` records it and every flight of the model flies it.
     ``control_check['wander']`` reports the pick's predicted
     wander on each checked loop. Without a white-box (a model-only check) the twin is not
     flown. A flight identified on the IMU's swing estimate (:func:`swing_source`) flies the
@@ -770,6 +776,7 @@ def select_for_control(
         "slow_motor_lag": slow_motor_lag,
         "slow_inertia": slow_inertia,
         "wander_sigmas": wander_sigmas,
+        "fallback": fallback,
     }
     selection = {k: v for k, v in given.items() if v is not None} | {"plant_label": label}
     if isinstance(twin, str):

@@ -12,6 +12,7 @@ use swing_core::control::shaper::{
     model_swing_mode, pendulum_swing_mode, InputShaper, ShaperSettings, SwingMode,
 };
 use swing_core::control::{AxisState, ControlError, ControlOutput, SwingController, TickInfo};
+use swing_core::design::Law;
 use swing_core::plant::PendulumModel;
 use swing_core::ConfigError;
 
@@ -84,6 +85,22 @@ impl PyController {
         let ctrl = InputShaper::new(mode, axes, &s).map_err(to_py)?;
         let info = serde_json::json!({"omega": omega, "zeta": zeta, "settings": s});
         Ok(Self::new(Box::new(ctrl), "shaper", info))
+    }
+
+    /// The law other than the MPC that `model`'s selection took (`design::law`: the input
+    /// shaper where no candidate's MPC passed), on the model's axes; `None` when the model
+    /// flies its MPC.
+    #[staticmethod]
+    fn flown(model: &PyLinearModel) -> PyResult<Option<Self>> {
+        let law = Law::of(&model.inner).map_err(to_py)?;
+        if law == Law::Mpc {
+            return Ok(None);
+        }
+        let ctrl = law
+            .controller(&model.inner, &Default::default())
+            .map_err(to_py)?;
+        let info = law.to_json();
+        Ok(Some(Self::new(ctrl, law.name(), info)))
     }
 
     /// ArduPilot's slung-payload feedback on the velocity setpoint for a cable of `length` [m].

@@ -6,11 +6,11 @@ use std::sync::{Mutex, MutexGuard};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use swing_core::control::lqr::{LqrController, LqrSettings};
-use swing_core::control::mpc::{MpcController, MpcSettings};
+use swing_core::control::mpc::MpcSettings;
 use swing_core::control::px4::AxisSetpoint;
 use swing_core::design::adaptive::TwinPrior;
 use swing_core::design::reidentify::Twin;
-use swing_core::design::{AdaptiveMpc, AdaptiveSettings};
+use swing_core::design::{AdaptiveMpc, AdaptiveSettings, Law};
 use swing_core::plant::PendulumModel;
 use swing_core::sim::{Scenario, Simulator, Trace, FLIGHT_COLUMNS, STATE_KEYS, TRACE_COLUMNS};
 use swing_core::ConfigError;
@@ -333,8 +333,9 @@ impl PySimulator {
         self.sim().tick_stats().tick_us.clone().into_pyarray(py)
     }
 
-    /// Fly the MPC on an identified model in place of PX4's velocity PID on the model's axes
-    /// from `engage_at` [s]; `budget` [s] per tick before fallback.
+    /// Fly what an identified model flies (`design::law`: the MPC on it in place of PX4's
+    /// velocity PID, or the input shaper its selection took on PX4's velocity setpoint) on
+    /// the model's axes from `engage_at` [s]; `budget` [s] per tick before fallback.
     #[pyo3(signature = (model, settings, engage_at, budget))]
     fn attach_mpc(
         &mut self,
@@ -344,9 +345,11 @@ impl PySimulator {
         budget: f64,
     ) -> PyResult<()> {
         let settings: MpcSettings = crate::convert::settings(settings, "mpc")?;
-        let mpc = MpcController::new(&model.inner, settings).map_err(to_py)?;
+        let ctrl = Law::of(&model.inner)
+            .and_then(|law| law.controller(&model.inner, &settings))
+            .map_err(to_py)?;
         self.sim_mut()
-            .attach_controller(Box::new(mpc), engage_at, budget)
+            .attach_controller(ctrl, engage_at, budget)
             .map_err(to_py)
     }
 

@@ -53,6 +53,7 @@ IDENT_COLUMNS = (
     "p",
     "test_nmae",
     "control_check_passed",
+    "law",
     "wb_payload_mass",
     "wb_length",
     "wb_attitude_lag",
@@ -198,6 +199,8 @@ def _prepare(raw: dict[str, Any], index: int, out: Path | None) -> _Prepared:
             "p": int(s.model.rank),
             "test_nmae": float(s.model.diagnostics.get("test_nmae", math.nan)),
             "control_check_passed": None if cc is None else bool(cc.get("passed", True)),
+            # What the model flies as `mpc` (design::law): its MPC, or the fallback law.
+            "law": None if cc is None else (cc.get("law") or {}).get("kind", "mpc"),
             "wb_payload_mass": None if s.lqr is None else s.lqr["m_p"],
             "wb_length": None if s.lqr is None else s.lqr["l"],
             "wb_attitude_lag": None if wb is None else _attitude_lag(wb),

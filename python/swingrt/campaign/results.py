@@ -33,6 +33,7 @@ _TYPES = {
     "p": "int64",
     "test_nmae": "float64",
     "control_check_passed": "bool",
+    "law": "string",
     "wb_payload_mass": "float64",
     "wb_length": "float64",
     "wb_attitude_lag": "float64",

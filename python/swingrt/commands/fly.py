@@ -147,6 +147,13 @@ def run(args) -> int:
     warning = unchecked_warning(model)
     if warning is not None:
         print(f"fly: {warning}", flush=True)
+    law = (model.diagnostics.get("control_check") or {}).get("law") or {}
+    if law.get("kind", "mpc") != "mpc" and not args.adapt:
+        print(
+            f"fly: no candidate's MPC passed the check; flying the {law['kind']} the selection "
+            "took on PX4's velocity setpoint",
+            flush=True,
+        )
     if args.adapt:
         path = "off (--no-twin)" if args.no_twin else "the model's own"
         if not args.no_twin and model_twin(model) is None:

@@ -158,7 +158,13 @@ def run(args) -> int:
         if checked["select"] == "control":
             result = sysid.select_for_control(data, result, axes=args.axes, twin=twin)
             cc = result.model.diagnostics["control_check"]
-            verdict = "passed" if cc["passed"] else "no candidate passed; least violating kept"
+            law = (cc.get("law") or {}).get("kind", "mpc")
+            if law != "mpc":
+                verdict = f"no candidate's MPC passed; the {law} passed and flies"
+            elif cc["passed"]:
+                verdict = "passed"
+            else:
+                verdict = "no candidate passed; least violating kept"
             print(f"closed-loop check: {verdict} ({len(cc['checked'])} candidate(s) flown)")
             print(f"  checked on: {cc['plant']}")
             if cc.get("twin"):

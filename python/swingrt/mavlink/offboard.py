@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from swingrt import _core
-from swingrt._core import AdaptiveMpc, ImuSwingEstimator, Mpc, check_settings
+from swingrt._core import AdaptiveMpc, Controller, ImuSwingEstimator, Mpc, check_settings
 from swingrt.errors import (
     ConfigError,
     ControlError,
@@ -922,7 +922,9 @@ class OffboardSession:
 def load_controller(
     model_path, settings=None, *, adapt: bool = False, adaptive=None, twin: bool = True
 ):
-    """Build the MPC (``swingrt._core.Mpc``) from a model file, or with ``adapt`` the
+    """Build what a model file flies: the MPC (``swingrt._core.Mpc``), or the law its
+    selection took where no MPC passed (``Controller.flown``, a velocity setpoint law), or
+    with ``adapt`` the
     adaptive MPC (``swingrt._core.AdaptiveMpc``, re-synthesis on a worker thread unless
     ``adaptive`` says otherwise); returns (ctrl, ts, axes). With ``twin`` (default) and a
     model selected on a vehicle twin (:func:`swingrt.sysid.model_twin`), the adaptive MPC
@@ -946,6 +948,10 @@ def load_controller(
         opts["twin"] = {**opts.get("twin", {}), "enabled": True}
         vehicle, payload = prior
         return AdaptiveMpc(model, settings, opts, vehicle, payload), model.dt, axes
+    law = Controller.flown(model)
+    if law is not None:
+        # The selection took another law where no MPC passed (a velocity setpoint law).
+        return law, law.period, axes
     return Mpc(model, settings), model.dt, axes
 
 

@@ -9,12 +9,14 @@
 //! - [`selection`]: the control-relevant choice among a search's candidates.
 //! - [`twin`]: the vehicle's twin as a check plant (a step flown on the simulator).
 //! - [`reidentify`]: a model re-identified on the twin for a payload measured in flight.
+//! - [`law`]: what a selected model flies (its MPC, or the input shaper the selection took).
 //! - [`error`]: why a model was not designed or not adopted ([`DesignError`]).
 //! - [`adaptive`]: the adaptive MPC (online identification, checked re-synthesis, swap).
 
 pub mod adaptive;
 pub mod check;
 pub mod error;
+pub mod law;
 pub mod reidentify;
 pub mod selection;
 pub mod twin;
@@ -25,3 +27,4 @@ pub(crate) mod fixtures;
 pub use adaptive::{AdaptiveMpc, AdaptiveSettings, SynthesisMode};
 pub use check::{mpc_step_check, step_check_with, StepCheck, StepCheckSettings};
 pub use error::DesignError;
+pub use law::Law;

@@ -35,6 +35,13 @@
 //! (`disturbance_factors`, [`TwinPlant::gust`]): a raised rate that passes every flight
 //! again flies when the gust leaves less swing.
 //!
+//! When no candidate's MPC passes and a twin is given, the `fallback` law — the input
+//! shaper of PX4's velocity setpoint on the white-box pendulum (`design::law`) — flies the
+//! same twin flights (not the linear plants: it feeds nothing back through the model) and
+//! is judged by the same [`judge`]; [`choose`] then picks among all of them by the same
+//! rule. The model is the MPC's pick either way; the law chosen is recorded in its
+//! diagnostics (`control_check.law`) and every flight of the model flies it.
+//!
 //! The decision is pure and separate from the flying: [`judge`] rules on one candidate's
 //! figures (every requirement it violates, as a [`Refusal`] that names the figure and its
 //! bound) and [`choose`] picks among the candidates judged.
@@ -43,8 +50,10 @@ use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use crate::config::{finite, non_negative, positive, ConfigError};
-use crate::control::{ControlError, MpcController, MpcSettings};
+use crate::control::shaper::{ModeSource, ShaperKind, ShaperSettings};
+use crate::control::{ControlError, MpcController, MpcSettings, SwingController};
 use crate::design::check::{self, worst_step_check, StepCheck};
+use crate::design::law::Law;
 use crate::design::twin::{TwinFlight, TwinGust, TwinHold, TwinPlant, TWIN_GUST, WANDER_SPAN};
 use crate::sysid::pipeline::{self, candidate_row};
 use crate::sysid::search::{Candidate, SearchResult};
@@ -357,6 +366,46 @@ pub struct SelectionSettings {
     /// What the plant of the check is and where its parameters came from, written into the
     /// diagnostics as `control_check.plant` (e.g. `whitebox(payload mass 0.2 kg from thrust)`).
     pub plant_label: String,
+    /// The law flown where no candidate's MPC passes ([`Fallback`]): the input shaper of
+    /// PX4's velocity setpoint on the white-box pendulum, judged on the twin like a
+    /// candidate, or none.
+    ///
+    /// Measured on `robustness-imu` seed 2 (samples 0–231, the swing from the IMU): of the
+    /// 25 flights where no candidate passed, the MPC's pick failed 7 and the ZVD shaper 2
+    /// (double pendulums, which the MPC failed too); over all 232 the shaper failed none of
+    /// the 197 single payloads. On seed 3's ten MPC failures ZVD flew all ten within the
+    /// bounds, ZV failed one (a double pendulum at 0.52× PX4's swing).
+    pub fallback: Fallback,
+}
+
+/// The law [`select_for_control`] flies where no candidate's MPC passes (`design::law`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Fallback {
+    /// None: the settled candidate that swings least, else the one that misses least.
+    None,
+    /// The ZV input shaper (two impulses, half a swing period of delay).
+    Zv,
+    /// The ZVD input shaper (three impulses, a swing period of delay, robust to the
+    /// length's error).
+    #[default]
+    Zvd,
+}
+
+impl Fallback {
+    /// The shaper's settings, `None` for no fallback.
+    fn shaper(self) -> Option<ShaperSettings> {
+        let kind = match self {
+            Self::None => return None,
+            Self::Zv => ShaperKind::Zv,
+            Self::Zvd => ShaperKind::Zvd,
+        };
+        Some(ShaperSettings {
+            kind,
+            source: ModeSource::Whitebox,
+            ..Default::default()
+        })
+    }
 }
 
 impl Default for SelectionSettings {
@@ -394,6 +443,7 @@ impl Default for SelectionSettings {
             slow_inertia: 1.5,
             wander_sigmas: 3.29,
             plant_label: "whitebox".into(),
+            fallback: Fallback::Zvd,
         }
     }
 }
@@ -586,8 +636,9 @@ fn significant(x: f64) -> String {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CandidateFigures {
     /// Worst figures over every linear plant and lag (NaN when the twin step flight
-    /// failed first and the linear plants were not flown).
-    pub worst: StepCheck,
+    /// failed first and the linear plants were not flown; `None` for a law with no
+    /// feedback on the model to fly there, the input shaper).
+    pub worst: Option<StepCheck>,
     /// The twin step flight, when a twin was given.
     pub twin: Option<TwinFlight>,
     /// The twin hold flight, when the candidate settled on the step flight and the linear
@@ -614,10 +665,10 @@ impl CandidateFigures {
                 .max(self.slow.unwrap_or(0.0))
                 .max(1.0)
         });
-        let linear = if self.worst.final_error.is_nan() {
-            f64::INFINITY
-        } else {
-            settings.bounds.miss(&self.worst)
+        let linear = match &self.worst {
+            None => 0.0,
+            Some(w) if w.final_error.is_nan() => f64::INFINITY,
+            Some(w) => settings.bounds.miss(w),
         };
         (twin, linear)
     }
@@ -697,8 +748,8 @@ pub fn judge(
     let mut refusals = figures.twin.map_or_else(Vec::new, |f| {
         settings.twin_bounds.step_refusals(&f, &settings.bounds)
     });
-    if refusals.is_empty() {
-        refusals = settings.bounds.refusals(&figures.worst);
+    if let (true, Some(worst)) = (refusals.is_empty(), &figures.worst) {
+        refusals = settings.bounds.refusals(worst);
     }
     if let (true, Some(h)) = (refusals.is_empty(), &figures.hold) {
         refusals = settings.twin_bounds.hold_refusals(h);
@@ -719,11 +770,13 @@ pub fn judge(
 /// One candidate flown in the check.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CheckedCandidate {
-    /// Delays q.
+    /// What it flies: the MPC on a model of the search, or the fallback law.
+    pub law: Law,
+    /// Delays q (of the model whose MPC flew; 0 for another law).
     pub delays: usize,
-    /// Rank p.
+    /// Rank p (0 for another law).
     pub rank: usize,
-    /// Held-out NMAE from the search.
+    /// Held-out NMAE from the search (NaN for another law).
     pub nmae: f64,
     /// The figures flown.
     pub figures: CandidateFigures,
@@ -810,6 +863,10 @@ pub fn choose(checked: &[CheckedCandidate], settings: &SelectionSettings) -> Opt
     });
     least_miss.map(|(i, _)| (i, Pick::LeastMiss))
 }
+
+/// A maker of fresh copies of one law's controller, one per flight (flights run side by
+/// side).
+type Fresh<'a> = dyn Fn() -> Result<Box<dyn SwingController>, ControlError> + Sync + 'a;
 
 /// One row of the search flown by [`select_for_control`]: the candidate, the model it was
 /// flown on and the screen's verdict when the search had not screened it.
@@ -919,18 +976,18 @@ pub fn select_for_control(
         _ => None,
     };
     // One candidate's figures and their verdict: the twin's step flight, then the linear
-    // plants, then the twin's hold, then the payload's tolerance and the slow vehicle, each
-    // only when `judge` admits every flight before it.
-    // The MPC is designed once; every flight flies a fresh copy of it.
-    let evaluate = |model: &LinearModel,
-                    mpc: MpcController|
+    // plants (an MPC's, on its `model`), then the twin's hold, then the payload's tolerance
+    // and the slow vehicle, each only when `judge` admits every flight before it.
+    // The law is designed once; every flight flies a fresh copy of it from `fresh`.
+    let evaluate_law = |fresh: &Fresh<'_>,
+                        mpc: Option<(&LinearModel, &MpcController)>|
      -> Result<(CandidateFigures, Verdict), ControlError> {
         let step = match twin {
-            Some(tw) => Some(tw.fly_with(mpc.fresh_copy()?)?),
+            Some(tw) => Some(tw.fly_with(fresh()?)?),
             None => None,
         };
         let mut figures = CandidateFigures {
-            worst: not_flown(),
+            worst: mpc.map(|_| not_flown()),
             twin: step.as_ref().map(|s| s.flight),
             hold: None,
             payload: None,
@@ -939,23 +996,23 @@ pub fn select_for_control(
         let on_twin = figures
             .twin
             .is_none_or(|f| settings.twin_bounds.admit(&f, &settings.bounds));
-        if on_twin {
+        if let (true, Some((model, mpc))) = (on_twin, mpc) {
             let set = check::Uncertainty {
                 plants: &plants,
                 input_lags: &lags,
                 input_delays: &settings.input_delays,
                 bound_amplitudes: &settings.bound_amplitudes,
             };
-            figures.worst = worst_step_check(&mpc, model, &set, settings.step)?;
+            figures.worst = Some(worst_step_check(mpc, model, &set, settings.step)?);
         }
         if let (Some(tw), Some(step)) = (twin, step) {
             if judge(&figures, pid, settings).settled() {
-                figures.hold = Some(tw.hold_on(step, mpc.fresh_copy()?)?);
+                figures.hold = Some(tw.hold_on(step, fresh()?)?);
             }
         }
         let robust = judge(&figures, pid, settings).settled();
         let miss = |tw: &TwinPlant| -> Result<f64, ControlError> {
-            let f = tw.fly_with(mpc.fresh_copy()?)?.flight;
+            let f = tw.fly_with(fresh()?)?.flight;
             Ok(settings.twin_bounds.miss(&f, None, &settings.bounds))
         };
         if robust {
@@ -976,6 +1033,12 @@ pub fn select_for_control(
             }
         }
         Ok((figures, judge(&figures, pid, settings)))
+    };
+    let evaluate = |model: &LinearModel, mpc: MpcController| {
+        let fresh = || -> Result<Box<dyn SwingController>, ControlError> {
+            Ok(Box::new(mpc.fresh_copy()?))
+        };
+        evaluate_law(&fresh, Some((model, &mpc)))
     };
     // The Kalman measurement noise designed against the flight's swing noise: the first
     // factor whose predicted wander is within the target, else the least wandering.
@@ -1070,6 +1133,7 @@ pub fn select_for_control(
         let (model, mpc) = design_noise(model, factors)?;
         let (figures, verdict) = evaluate(&model, mpc)?;
         let candidate = CheckedCandidate {
+            law: Law::Mpc,
             delays: row.delays,
             rank: row.rank,
             nmae: row.nmae,
@@ -1154,8 +1218,40 @@ pub fn select_for_control(
             second_pass = Some((strongest_noise, checked.len() - start));
         }
     }
-    let (pick_index, pick) = choose(&checked, settings)
+    let (pick_index, mpc_pick) = choose(&checked, settings)
         .ok_or_else(|| ControlError::Model("the search has no stable candidate to check".into()))?;
+    let mpc_passed = mpc_pick == Pick::WithinBounds;
+    // Where no MPC passed, the fallback law flies the same flights on the twin and is
+    // chosen among the candidates by the same rule; the model stays the MPC's pick, for
+    // its diagnostics and for a controller that designs its own MPC on it.
+    let mut law = Law::Mpc;
+    let mut pick = mpc_pick;
+    let fallback_law = match (twin, settings.fallback.shaper()) {
+        (Some(tw), Some(shaper)) if !mpc_passed => {
+            Law::whitebox_shaper(plant, tw.px4(), &shaper)?.map(|law| (law, tw.axes()))
+        }
+        _ => None,
+    };
+    if let Some((fallback, axes)) = fallback_law {
+        let (figures, verdict) = {
+            let fresh = || fallback.controller_on(axes, plant, mpc_settings);
+            evaluate_law(&fresh, None)?
+        };
+        checked.push(CheckedCandidate {
+            law: fallback.clone(),
+            delays: 0,
+            rank: 0,
+            nmae: f64::NAN,
+            figures,
+            verdict,
+            swing_measurement_noise: None,
+        });
+        let (i, p) = choose(&checked, settings).expect("the MPC's pick is among them");
+        if i == checked.len() - 1 {
+            law = fallback;
+            pick = p;
+        }
+    }
     let passed = pick == Pick::WithinBounds;
     // A candidate that passed is a model in hand; any other is refitted, with the
     // estimator noise it was flown with.
@@ -1171,7 +1267,7 @@ pub fn select_for_control(
     };
     // The disturbance estimate's rate designed on the twin's gust, for a pick that passed.
     let disturbance_design = match twin {
-        Some(tw) if passed && settings.disturbance_factors.iter().any(|&f| f > 1.0) => {
+        Some(tw) if mpc_passed && settings.disturbance_factors.iter().any(|&f| f > 1.0) => {
             let (designed, report) = design_disturbance(
                 model,
                 mpc_settings,
@@ -1219,6 +1315,8 @@ pub fn select_for_control(
                 "swing_bound": settings.twin_bounds.swing_bound(t.pid_flight()),
             })),
             "passed": passed,
+            "law": law.to_json(),
+            "fallback": settings.fallback,
             "passers": settings.passers,
             "look_ahead": settings.look_ahead,
             "pick": pick.to_string(),
@@ -1399,15 +1497,16 @@ fn predicted_wander(
 fn checked_json(c: &CheckedCandidate) -> serde_json::Value {
     let f = &c.figures;
     json!({
+        "law": c.law.name(),
         "delays": c.delays,
         "rank": c.rank,
         "nmae": c.nmae,
         "passed": c.passed(),
         "settled": c.settled(),
         "refused": c.verdict.reasons(),
-        "overshoot": f.worst.overshoot,
-        "final_error": f.worst.final_error,
-        "hold_drift": f.worst.hold_drift,
+        "overshoot": f.worst.map(|w| w.overshoot),
+        "final_error": f.worst.map(|w| w.final_error),
+        "hold_drift": f.worst.map(|w| w.hold_drift),
         "twin": f.twin.as_ref().map(flight_json),
         "swing_measurement_noise": c.swing_measurement_noise,
         "hold": f.hold.map(|h| json!({"wander": h.wander, "late_error": h.late_error})),
@@ -1447,11 +1546,11 @@ mod tests {
     /// Figures within every default bound.
     fn good() -> CandidateFigures {
         CandidateFigures {
-            worst: StepCheck {
+            worst: Some(StepCheck {
                 overshoot: 0.1,
                 final_error: 0.01,
                 hold_drift: 0.02,
-            },
+            }),
             twin: Some(TwinFlight {
                 check: StepCheck {
                     overshoot: 0.1,
@@ -1487,7 +1586,7 @@ mod tests {
     /// `good()` with its linear worst check changed by `f`.
     fn with_worst(f: impl FnOnce(&mut StepCheck)) -> CandidateFigures {
         let mut figures = good();
-        f(&mut figures.worst);
+        f(figures.worst.as_mut().unwrap());
         figures
     }
 
@@ -1498,6 +1597,7 @@ mod tests {
     /// A candidate judged as `select_for_control` judges it.
     fn checked(figures: CandidateFigures) -> CheckedCandidate {
         CheckedCandidate {
+            law: Law::Mpc,
             delays: 1,
             rank: 1,
             nmae: 0.1,
@@ -1621,11 +1721,11 @@ mod tests {
         let s = SelectionSettings::default();
         let (b, t) = (s.bounds, s.twin_bounds);
         let at_bounds = CandidateFigures {
-            worst: StepCheck {
+            worst: Some(StepCheck {
                 overshoot: b.overshoot,
                 final_error: b.final_error,
                 hold_drift: b.hold_drift,
-            },
+            }),
             twin: Some(TwinFlight {
                 check: StepCheck {
                     overshoot: b.overshoot,
@@ -1775,7 +1875,7 @@ mod tests {
     fn flights_gated_behind_a_failed_one_refuse_nothing() {
         // The twin step failed: the linear plants and the hold were not flown.
         let mut figures = with_twin(|f| *f = TwinFlight::diverged());
-        figures.worst = not_flown();
+        figures.worst = Some(not_flown());
         figures.hold = None;
         let v = verdict(&figures);
         let failed: Vec<_> = v.refusals.iter().map(|r| r.requirement).collect();
@@ -1784,7 +1884,7 @@ mod tests {
         assert_eq!(failed, [&twin[..], &[Swing]].concat(), "{:?}", v.reasons());
         // Whatever the later figures say, they were not flown after a failed twin step...
         let mut late = with_twin(|f| f.settle = 9.0);
-        late.worst.final_error = 1.0;
+        late.worst.as_mut().unwrap().final_error = 1.0;
         late.hold = Some(TwinHold::diverged());
         assert_eq!(verdict(&late).refusals, vec![refusal(TwinSettle, 9.0, 6.0)]);
         // ... nor the hold after a failed linear check.
@@ -1871,7 +1971,7 @@ mod tests {
             f.settle = 7.2;
             f.swing_excess = 0.5 * bound;
         });
-        late.worst = not_flown();
+        late.worst = Some(not_flown());
         late.hold = None;
         let candidates = [checked(undamped), checked(late)];
         let miss = candidates[0].verdict.swing_miss();
@@ -1885,7 +1985,7 @@ mod tests {
         let s = SelectionSettings::default();
         // 1.2 times the twin's settle bound; the linear plants not flown.
         let mut twin_late = with_twin(|f| f.settle = 7.2);
-        twin_late.worst = not_flown();
+        twin_late.worst = Some(not_flown());
         twin_late.hold = None;
         // Settled on the twin; 3 and 2 times the linear final error bound.
         let linear_far = with_worst(|c| c.final_error = 0.09);
@@ -1895,6 +1995,60 @@ mod tests {
         candidates.push(checked(linear_near));
         assert_eq!(choose(&candidates, &s), Some((2, Pick::LeastMiss)));
         assert_eq!(choose(&[], &s), None);
+    }
+
+    #[test]
+    fn a_law_without_feedback_on_the_model_is_judged_on_the_twin_alone() {
+        let s = SelectionSettings::default();
+        let mut shaper = good();
+        shaper.worst = None;
+        assert!(verdict(&shaper).passed());
+        assert_eq!(shaper.miss(&s).1, 0.0);
+        // Its hold is flown after the twin's step alone, and judged.
+        let mut late = shaper;
+        late.hold = Some(TwinHold {
+            wander: 0.5,
+            late_error: 0.0,
+        });
+        let refused: Vec<_> = verdict(&late)
+            .refusals
+            .iter()
+            .map(|r| r.requirement)
+            .collect();
+        assert_eq!(refused, vec![Requirement::Wander]);
+        let mut slow = shaper;
+        slow.twin.as_mut().unwrap().settle = 9.0;
+        assert_eq!(
+            verdict(&slow).refusals,
+            vec![refusal(Requirement::TwinSettle, 9.0, 6.0)]
+        );
+    }
+
+    #[test]
+    fn where_no_mpc_passed_a_fallback_law_that_passed_is_chosen_and_one_that_failed_is_not() {
+        let s = SelectionSettings::default();
+        let swinging = checked(with_twin(|f| f.swing_excess = 6.0));
+        let mut shaper = good();
+        shaper.worst = None;
+        let mut fallback = checked(shaper);
+        fallback.law = Law::Shaper {
+            mode: crate::control::SwingMode {
+                omega: 3.0,
+                zeta: 0.01,
+            },
+            settings: Fallback::Zvd.shaper().unwrap(),
+        };
+        let candidates = [swinging.clone(), fallback.clone()];
+        assert_eq!(choose(&candidates, &s), Some((1, Pick::WithinBounds)));
+        // A fallback that swings more than the settled MPC is not taken.
+        fallback.figures.twin.as_mut().unwrap().swing_excess = 8.0;
+        fallback.verdict = verdict(&fallback.figures);
+        assert_eq!(
+            choose(&[swinging, fallback], &s),
+            Some((0, Pick::LeastSwing))
+        );
+        assert_eq!(Fallback::None.shaper(), None);
+        assert_eq!(Fallback::Zv.shaper().unwrap().kind, ShaperKind::Zv);
     }
 
     #[test]
@@ -1919,10 +2073,10 @@ mod tests {
         let (b, t) = (s.bounds, s.twin_bounds);
         let f = good();
         let (flight, hold) = (f.twin.unwrap(), f.hold.unwrap());
-        assert!(b.admit(&f.worst) && t.admit(&flight, &b) && t.holds(&hold));
+        assert!(b.admit(&f.worst.unwrap()) && t.admit(&flight, &b) && t.holds(&hold));
         assert!(t.damps(&flight, &pid()));
         let bad = with_worst(|c| c.overshoot = f64::NAN);
-        assert!(!b.admit(&bad.worst));
+        assert!(!b.admit(&bad.worst.unwrap()));
         assert!(!t.admit(&TwinFlight::diverged(), &b));
         assert!(!t.holds(&TwinHold::diverged()));
         assert!(!t.damps(&TwinFlight::diverged(), &pid()));

@@ -3,7 +3,8 @@
 //! MPC flies a velocity step (and holds it) before it is flown on the linear plants.
 
 use crate::config::{positive, ConfigError};
-use crate::control::{ControlError, MpcController, MpcSettings};
+use crate::control::px4::Px4Params;
+use crate::control::{ControlError, MpcController, MpcSettings, SwingController};
 use crate::design::check::{overshoot, swing_iae, StepCheck, FINAL_SPAN};
 use crate::plant::{PayloadKind, WindParams};
 use crate::sensors::{ImuParams, SwingSource};
@@ -280,6 +281,16 @@ impl TwinPlant {
         Self::flown(sc, self.step, self.axes, label, false)
     }
 
+    /// PX4's parameters the twin flies with (the training flight's).
+    pub fn px4(&self) -> &Px4Params {
+        &self.scenario.controller
+    }
+
+    /// The number of axes the twin's step is flown on (1 = N, 2 = N + E).
+    pub fn axes(&self) -> usize {
+        self.axes
+    }
+
     /// The time constant of the twin's motors [s].
     pub fn motor_lag(&self) -> f64 {
         self.scenario.vehicle.motor_tau
@@ -309,16 +320,16 @@ impl TwinPlant {
         settings: &MpcSettings,
     ) -> Result<TwinFlight, ControlError> {
         Ok(self
-            .fly_with(MpcController::new(model, settings.clone())?)?
+            .fly_with(Box::new(MpcController::new(model, settings.clone())?))?
             .flight)
     }
 
-    /// Fly the controller `mpc` (not flown before) on the step, and keep the flight to be
-    /// held on ([`Self::hold_on`]).
-    pub fn fly_with(&self, mpc: MpcController) -> Result<TwinStep, ControlError> {
+    /// Fly the controller `ctrl` (not flown before: an MPC, or a law on PX4's velocity
+    /// setpoint) on the step, and keep the flight to be held on ([`Self::hold_on`]).
+    pub fn fly_with(&self, ctrl: Box<dyn SwingController>) -> Result<TwinStep, ControlError> {
         let mut sc = self.scenario.clone();
         sc.duration = TWIN_HOLD_SECONDS;
-        let mut sim = self.start(sc, mpc)?;
+        let mut sim = self.start(sc, ctrl)?;
         // One physics step past the step flight's end, so that its last row is logged: the
         // rows so far are the step flight's, draw for draw.
         let until = TWIN_CHECK_SECONDS + self.scenario.physics_dt;
@@ -348,15 +359,19 @@ impl TwinPlant {
         settings: &MpcSettings,
     ) -> Result<TwinHold, ControlError> {
         let mpc = MpcController::new(model, settings.clone())?;
-        let step = self.fly_with(mpc.fresh_copy()?)?;
-        self.hold_on(step, mpc)
+        let step = self.fly_with(Box::new(mpc.fresh_copy()?))?;
+        self.hold_on(step, Box::new(mpc))
     }
 
     /// Hold the step flight `step` on to [`TWIN_HOLD_SECONDS`] with the sensor noise and,
-    /// when there is some, fly the controller `mpc` (of the same design, not flown before)
+    /// when there is some, fly the controller `ctrl` (of the same design, not flown before)
     /// again without it (the same draws otherwise): what the noise alone does to the
     /// velocity, and whether the flight without it stays on the setpoint.
-    pub fn hold_on(&self, step: TwinStep, mpc: MpcController) -> Result<TwinHold, ControlError> {
+    pub fn hold_on(
+        &self,
+        step: TwinStep,
+        ctrl: Box<dyn SwingController>,
+    ) -> Result<TwinHold, ControlError> {
         let Some(mut noisy) = step.sim else {
             return Ok(TwinHold::diverged());
         };
@@ -377,7 +392,7 @@ impl TwinPlant {
                 let Some(sc) = quiet else {
                     return Ok(None);
                 };
-                let Some(sim) = self.finish(self.start(sc, mpc)?)? else {
+                let Some(sim) = self.finish(self.start(sc, ctrl)?)? else {
                     return Ok(Some(None));
                 };
                 let velocities = ["vn", "ve"]
@@ -437,7 +452,7 @@ impl TwinPlant {
             duration: TWIN_GUST_DURATION,
             amplitude: [against, if self.axes == 2 { against } else { 0.0 }, 0.0],
         }];
-        let Some(sim) = self.finish(self.start(sc, mpc)?)? else {
+        let Some(sim) = self.finish(self.start(sc, Box::new(mpc))?)? else {
             return Ok(TwinGust::diverged());
         };
         let t = column(&sim, "t")?;
@@ -476,18 +491,21 @@ impl TwinPlant {
     }
 
     /// A simulator of `scenario` with `mpc` attached, not yet flown.
-    fn start(&self, scenario: Scenario, mpc: MpcController) -> Result<Simulator, ControlError> {
-        use crate::control::SwingController;
-        if mpc.axes() != self.axes {
+    fn start(
+        &self,
+        scenario: Scenario,
+        ctrl: Box<dyn SwingController>,
+    ) -> Result<Simulator, ControlError> {
+        if ctrl.axes() != self.axes {
             return Err(ControlError::Model(format!(
                 "the twin flies {} axes, the controller {}",
                 self.axes,
-                mpc.axes()
+                ctrl.axes()
             )));
         }
         let mut sim = Simulator::new(scenario).map_err(sim_error)?;
         // The check measures the control law, not the machine it runs on: no tick budget.
-        sim.attach_controller(Box::new(mpc), 0.0, f64::MAX)
+        sim.attach_controller(ctrl, 0.0, f64::MAX)
             .map_err(sim_error)?;
         Ok(sim)
     }
@@ -732,10 +750,10 @@ mod tests {
         let twin = TwinPlant::new(&sc, &plant, 2.0, 1).unwrap();
         let settings = MpcSettings::default();
         let mpc = MpcController::new(&tpl, settings.clone()).unwrap();
-        let held = twin.fly_with(mpc.fresh_copy().unwrap()).unwrap();
+        let held = twin.fly_with(Box::new(mpc.fresh_copy().unwrap())).unwrap();
         let alone = twin
             .finish(
-                twin.start(twin.scenario.clone(), mpc.fresh_copy().unwrap())
+                twin.start(twin.scenario.clone(), Box::new(mpc.fresh_copy().unwrap()))
                     .unwrap(),
             )
             .unwrap()
@@ -743,7 +761,7 @@ mod tests {
         assert_eq!(alone.time(), TWIN_CHECK_SECONDS);
         assert_eq!(held.flight, measure(&alone, usize::MAX, 2.0, 1).unwrap());
         assert!(held.flight.settle < 6.0, "{:?}", held.flight);
-        let hold = twin.hold_on(held, mpc).unwrap();
+        let hold = twin.hold_on(held, Box::new(mpc)).unwrap();
         assert!(hold.wander > 0.0, "{hold:?}");
         assert_eq!(hold, twin.hold(&tpl, &settings).unwrap());
     }
