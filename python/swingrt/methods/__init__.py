@@ -240,8 +240,15 @@ def train(
         start = [int(model.delays)] if model is not None else None
         result = search(flight, axes=axes, method="havokc", delays=start, **opts)
         if result.settings["select"] == "control":
+            # The method is HAVOKc's MPC: where none passes it flies the least violating
+            # one, not the selection's fallback shaper (a method of its own here).
             result = select_for_control(
-                flight, result, axes=axes, mpc_settings=mpc_settings or None, twin=twin
+                flight,
+                result,
+                axes=axes,
+                mpc_settings=mpc_settings or None,
+                twin=twin,
+                fallback="none",
             )
         learned = result.model
         info = {"q": int(learned.delays), "p": int(learned.rank)}

@@ -16,7 +16,7 @@
 
 use crate::config::{positive, ConfigError};
 use crate::control::MpcSettings;
-use crate::design::selection::{select_for_control, SelectionSettings};
+use crate::design::selection::{select_for_control, Fallback, SelectionSettings};
 use crate::design::twin::TwinPlant;
 use crate::design::DesignError;
 use crate::plant::PayloadKind;
@@ -155,6 +155,9 @@ impl Twin {
         let plant = whitebox_model(&train, &template.states, &template.inputs, &settings, mass)?;
         let selection_settings = SelectionSettings {
             plant_label: format!("twin whitebox (payload {mass:.3} kg on {length:.2} m)"),
+            // The adaptive MPC swaps MPC models: a model whose MPC did not pass is not one
+            // to adopt, whatever else would have.
+            fallback: Fallback::None,
             ..SelectionSettings::default()
         };
         // The same selection as the model's own, twin flights included: at a long delay
