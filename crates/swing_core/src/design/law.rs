@@ -17,7 +17,9 @@ use serde_json::Value;
 
 use crate::control::layout::AxisLayout;
 use crate::control::px4::Px4Params;
-use crate::control::shaper::{pendulum_swing_mode, InputShaper, ShaperSettings, SwingMode};
+use crate::control::shaper::{
+    pendulum_swing_mode, InputShaper, ModeSource, ShaperSettings, SwingMode,
+};
 use crate::control::{ControlError, MpcController, MpcSettings, SwingController};
 use crate::plant::PendulumModel;
 use crate::sysid::LinearModel;
@@ -30,10 +32,14 @@ pub enum Law {
     #[default]
     Mpc,
     /// The input shaper of PX4's velocity setpoint for `mode`, the swing mode PX4's loop
-    /// leaves in the white-box pendulum.
+    /// leaves in the white-box pendulum, in series with one for `second` where the white-box
+    /// found two links.
     Shaper {
         /// The shaped mode.
         mode: SwingMode,
+        /// The lower link's mode of a double pendulum, shaped too.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        second: Option<SwingMode>,
         /// The shaper's kind and period.
         settings: ShaperSettings,
     },
@@ -42,7 +48,9 @@ pub enum Law {
 impl Law {
     /// The shaper of `settings` on the white-box pendulum of `model`'s diagnostics, closed
     /// by PX4's velocity loop of `px4` at the model's sample time; `None` when the model
-    /// carries no white-box estimate.
+    /// carries no white-box estimate. Where the white-box found two links, their second
+    /// mode is shaped too, at its rate with the vehicle held (`sysid::links::modes`): it
+    /// lies well above the vehicle's velocity loop, which moves the first mode, not it.
     pub fn whitebox_shaper(
         model: &LinearModel,
         px4: &Px4Params,
@@ -58,9 +66,22 @@ impl Law {
             c: w.friction,
         };
         let mode = pendulum_swing_mode(&pendulum, model.dt, px4)?;
+        let second = w
+            .links
+            .as_ref()
+            .filter(|d| d.second_mode.is_finite() && d.second_mode > mode.omega)
+            .map(|d| SwingMode {
+                omega: d.second_mode,
+                zeta: 0.0,
+            });
+        // The record says where the mode came from, whatever source `settings` named.
         Ok(Some(Self::Shaper {
             mode,
-            settings: settings.clone(),
+            second,
+            settings: ShaperSettings {
+                source: ModeSource::Whitebox,
+                ..settings.clone()
+            },
         }))
     }
 
@@ -86,8 +107,16 @@ impl Law {
 
     /// Check the shaper's mode and settings.
     pub fn validate(&self) -> Result<(), ControlError> {
-        if let Self::Shaper { mode, settings } = self {
+        if let Self::Shaper {
+            mode,
+            second,
+            settings,
+        } = self
+        {
             mode.validate()?;
+            if let Some(m) = second {
+                m.validate()?;
+            }
             settings.validate()?;
         }
         Ok(())
@@ -126,8 +155,13 @@ impl Law {
     ) -> Result<Box<dyn SwingController>, ControlError> {
         match self {
             Self::Mpc => Ok(Box::new(MpcController::new(model, mpc_settings.clone())?)),
-            Self::Shaper { mode, settings } => {
-                Ok(Box::new(InputShaper::new(*mode, axes, settings)?))
+            Self::Shaper {
+                mode,
+                second,
+                settings,
+            } => {
+                let modes: Vec<SwingMode> = std::iter::once(*mode).chain(*second).collect();
+                Ok(Box::new(InputShaper::for_modes(&modes, axes, settings)?))
             }
         }
     }
@@ -146,6 +180,7 @@ mod tests {
                 omega: 3.1,
                 zeta: 0.02,
             },
+            second: None,
             settings: ShaperSettings {
                 kind: ShaperKind::Zv,
                 ..Default::default()
@@ -196,6 +231,75 @@ mod tests {
                 .to_string();
             assert!(err.contains("law") || err.contains("omega"), "{bad}: {err}");
         }
+    }
+
+    #[test]
+    fn the_whitebox_shaper_shapes_the_second_mode_where_the_white_box_found_two_links() {
+        use crate::sysid::links::{modes, DoublePendulum};
+        use crate::sysid::WhiteboxEstimates;
+        let mut m = model();
+        assert_eq!(
+            Law::whitebox_shaper(&m, &Px4Params::default(), &ShaperSettings::default()).unwrap(),
+            None
+        );
+        let (l1, l2, mu) = (0.8, 0.4, 0.5);
+        let (_, second_mode, mode_share) = modes(l1, l2, mu);
+        let single = WhiteboxEstimates {
+            vehicle_mass: 0.952,
+            payload_mass: 0.3,
+            length: 1.0,
+            friction: 0.0,
+            ..Default::default()
+        };
+        let px4 = Px4Params::default();
+        let settings = ShaperSettings::default();
+        m.diagnostics.whitebox = Some(single.clone());
+        let Some(Law::Shaper {
+            mode,
+            second: None,
+            settings: recorded,
+        }) = Law::whitebox_shaper(&m, &px4, &settings).unwrap()
+        else {
+            panic!("a single pendulum's shaper shapes one mode");
+        };
+        // The first mode is the pendulum's under PX4's loop; the record says where it came from.
+        let pendulum = PendulumModel {
+            m_q: 0.952,
+            m_p: 0.3,
+            l: 1.0,
+            c: 0.0,
+        };
+        assert_eq!(mode, pendulum_swing_mode(&pendulum, m.dt, &px4).unwrap());
+        assert_eq!(recorded.source, ModeSource::Whitebox);
+        m.diagnostics.whitebox = Some(WhiteboxEstimates {
+            links: Some(DoublePendulum {
+                length: l1,
+                length2: l2,
+                mass_ratio: mu,
+                error_ratio: 0.5,
+                second_mode,
+                mode_share,
+            }),
+            ..single
+        });
+        let law = Law::whitebox_shaper(&m, &px4, &settings).unwrap().unwrap();
+        let Law::Shaper {
+            second: Some(second),
+            ..
+        } = law
+        else {
+            panic!("a double pendulum's shaper shapes its second mode: {law:?}");
+        };
+        assert_eq!(second.omega, second_mode);
+        assert_eq!(Law::of(&recording(Some(law.to_json()))).unwrap(), law);
+        // Nine impulses of the two ZVDs in series: the controller is the series shaper.
+        let mut c = law.controller(&m, &MpcSettings::default()).unwrap();
+        let state = [crate::control::AxisState::default()];
+        c.reset(&state, &[0.0]);
+        let mut out = [0.0];
+        c.step(&state, &[1.0], &mut out).unwrap();
+        let first = crate::control::shaper::series(settings.kind, &[mode, second])[0].1;
+        assert!((out[0] - first).abs() < 1e-12, "{} vs {first}", out[0]);
     }
 
     #[test]

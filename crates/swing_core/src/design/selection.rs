@@ -767,17 +767,32 @@ pub fn judge(
     Verdict { refusals }
 }
 
+/// A model of the search, as a checked candidate names it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SearchModel {
+    /// Delays q.
+    pub delays: usize,
+    /// Rank p.
+    pub rank: usize,
+    /// Held-out NMAE from the search.
+    pub nmae: f64,
+}
+
+impl SearchModel {
+    /// (q, p), the model's key in the search's table.
+    pub fn key(&self) -> (usize, usize) {
+        (self.delays, self.rank)
+    }
+}
+
 /// One candidate flown in the check.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CheckedCandidate {
     /// What it flies: the MPC on a model of the search, or the fallback law.
     pub law: Law,
-    /// Delays q (of the model whose MPC flew; 0 for another law).
-    pub delays: usize,
-    /// Rank p (0 for another law).
-    pub rank: usize,
-    /// Held-out NMAE from the search (NaN for another law).
-    pub nmae: f64,
+    /// The search's model the MPC flew on; `None` for a law flown without one (the
+    /// fallback shaper, designed on the white-box pendulum).
+    pub model: Option<SearchModel>,
     /// The figures flown.
     pub figures: CandidateFigures,
     /// The verdict of [`judge`] on them.
@@ -1134,9 +1149,11 @@ pub fn select_for_control(
         let (figures, verdict) = evaluate(&model, mpc)?;
         let candidate = CheckedCandidate {
             law: Law::Mpc,
-            delays: row.delays,
-            rank: row.rank,
-            nmae: row.nmae,
+            model: Some(SearchModel {
+                delays: row.delays,
+                rank: row.rank,
+                nmae: row.nmae,
+            }),
             figures,
             verdict,
             swing_measurement_noise: model.diagnostics.swing_measurement_noise,
@@ -1177,7 +1194,7 @@ pub fn select_for_control(
                 c.swing_measurement_noise
                     .is_some_and(|n| (n - strongest_noise).abs() <= 1e-12 * n)
             })
-            .map(|c| (c.delays, c.rank))
+            .filter_map(|c| c.model.map(|m| m.key()))
             .collect();
         let pass_rows: Vec<&Candidate> = rows
             .iter()
@@ -1239,9 +1256,7 @@ pub fn select_for_control(
         };
         checked.push(CheckedCandidate {
             law: fallback.clone(),
-            delays: 0,
-            rank: 0,
-            nmae: f64::NAN,
+            model: None,
             figures,
             verdict,
             swing_measurement_noise: None,
@@ -1260,7 +1275,10 @@ pub fn select_for_control(
         Some((_, m)) => m,
         None => {
             let c = &checked[pick_index];
-            let mut m = refit(c.delays, c.rank)?;
+            let flown = c.model.ok_or_else(|| {
+                ControlError::Model("the MPC's pick names no model of the search".into())
+            })?;
+            let mut m = refit(flown.delays, flown.rank)?;
             m.diagnostics.swing_measurement_noise = c.swing_measurement_noise;
             m
         }
@@ -1498,9 +1516,9 @@ fn checked_json(c: &CheckedCandidate) -> serde_json::Value {
     let f = &c.figures;
     json!({
         "law": c.law.name(),
-        "delays": c.delays,
-        "rank": c.rank,
-        "nmae": c.nmae,
+        "delays": c.model.map(|m| m.delays),
+        "rank": c.model.map(|m| m.rank),
+        "nmae": c.model.map(|m| m.nmae),
         "passed": c.passed(),
         "settled": c.settled(),
         "refused": c.verdict.reasons(),
@@ -1598,9 +1616,11 @@ mod tests {
     fn checked(figures: CandidateFigures) -> CheckedCandidate {
         CheckedCandidate {
             law: Law::Mpc,
-            delays: 1,
-            rank: 1,
-            nmae: 0.1,
+            model: Some(SearchModel {
+                delays: 1,
+                rank: 1,
+                nmae: 0.1,
+            }),
             figures,
             verdict: verdict(&figures),
             swing_measurement_noise: None,
@@ -2031,11 +2051,13 @@ mod tests {
         let mut shaper = good();
         shaper.worst = None;
         let mut fallback = checked(shaper);
+        fallback.model = None;
         fallback.law = Law::Shaper {
             mode: crate::control::SwingMode {
                 omega: 3.0,
                 zeta: 0.01,
             },
+            second: None,
             settings: Fallback::Zvd.shaper().unwrap(),
         };
         let candidates = [swinging.clone(), fallback.clone()];
