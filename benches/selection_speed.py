@@ -8,12 +8,16 @@ the twin ``identify`` flies by default (the built-in vehicle) and with the exact
 a campaign's ``twin = "exact"`` does. For each, prints the number of candidates flown, the
 model chosen and the median wall time over ``--repeat`` runs; with ``--baseline DIR`` (the
 ``python`` directory of another checkout, its ``_core`` built) the same runs in a
-subprocess on that swingrt, the ratio of the medians, and whether both chose the same model
-with the same figures (relative 1e-6). Run it under ``taskset -c 0`` for the one-core
-figure (the selection flies independent checks side by side on the cores it may use). Exit
-status 1 when the choices differ.
+subprocess on that swingrt: its candidates flown and model chosen, the ratio of the
+medians, and whether both chose the same model with the same figures (relative 1e-6).
+``--settings JSON`` passes selection settings (keywords of ``sysid.select_for_control``) to
+this swingrt's runs only: e.g. ``'{"look_ahead": 0}'`` to time it without a rule the
+baseline does not have. Run it under ``taskset -c 0`` for the one-core figure (the
+selection flies independent checks side by side on the cores it may use). Exit status 1
+when the choices differ and ``--same`` was given.
 
     python benches/selection_speed.py [--repeat 5] [--samples 201 42] [--baseline DIR]
+        [--settings JSON] [--same]
 """
 
 from __future__ import annotations
@@ -44,7 +48,7 @@ def sample(index: int):
     return _run(sc, False, "collect"), sc
 
 
-def measure(samples: list[int], repeat: int) -> dict:
+def measure(samples: list[int], repeat: int, settings: dict) -> dict:
     """Per sample and twin: median seconds, candidates flown, the choice and its figures."""
     from swingrt import sysid
     from swingrt.scenario import resolve
@@ -57,7 +61,7 @@ def measure(samples: list[int], repeat: int) -> dict:
             for _ in range(repeat):
                 t0 = time.perf_counter()
                 result = sysid.search(train)
-                picked = sysid.select_for_control(train, result, twin=twin)
+                picked = sysid.select_for_control(train, result, twin=twin, **settings)
                 times.append(time.perf_counter() - t0)
             cc = picked.model.diagnostics["control_check"]
             out[f"{index}/{twin_name}"] = {
@@ -85,9 +89,14 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--samples", type=int, nargs="+", default=[201, 42])
     ap.add_argument("--baseline", help="python directory of another swingrt to compare with")
+    ap.add_argument("--settings", default="{}", help="selection settings of this swingrt")
+    ap.add_argument("--same", action="store_true", help="exit 1 when the choices differ")
     ap.add_argument("--json", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args()
-    here = measure(args.samples, args.repeat)
+    settings = json.loads(args.settings)
+    if not isinstance(settings, dict):
+        ap.error("--settings: a JSON object of selection settings")
+    here = measure(args.samples, args.repeat, settings)
     if args.json:
         json.dump(here, sys.stdout)
         return 0
@@ -103,7 +112,10 @@ def main() -> int:
             return 2
         base = json.loads(run.stdout)
     print(f"{'flight/twin':<14} {'flown':>5} {'chosen':>9} {'median s':>9}", end="")
-    print(f" {'baseline s':>10} {'ratio':>6} {'same':>5}" if base else "")
+    if base:
+        print(f" {'base flown':>10} {'base chose':>10} {'baseline s':>10} {'ratio':>6} {'same':>5}")
+    else:
+        print()
     differ = False
     for key, r in here.items():
         line = f"{key:<14} {r['flown']:>5} {str(tuple(r['chosen'])):>9} {r['median_s']:>9.2f}"
@@ -111,9 +123,12 @@ def main() -> int:
             b = base[key]
             same = b["chosen"] == r["chosen"] and same_figures(b["checked"], r["checked"])
             differ |= not same
-            line += f" {b['median_s']:>10.2f} {b['median_s'] / r['median_s']:>5.2f}x {same!s:>5}"
+            chose = str(tuple(b["chosen"]))
+            ratio = b["median_s"] / r["median_s"]
+            line += f" {b['flown']:>10} {chose:>10} {b['median_s']:>10.2f}"
+            line += f" {ratio:>5.2f}x {same!s:>5}"
         print(line)
-    return 1 if differ else 0
+    return 1 if differ and args.same else 0
 
 
 if __name__ == "__main__":

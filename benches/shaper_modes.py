@@ -16,26 +16,17 @@ Run:  python benches/shaper_modes.py SPEC.toml SEED IDX[,IDX...] [--swing sensor
 from __future__ import annotations
 
 import argparse
-import math
 import tomllib
 from typing import Any
 
 from swingrt import _core
-from swingrt._core import GRAVITY
 from swingrt.campaign.flight import EXCESS
 from swingrt.campaign.spec import parse_spec
 from swingrt.experiments import evaluation_scenario, simulate_controller, training_scenario
+from swingrt.experiments.identification import case_vehicle_mass
 from swingrt.metrics import step_metrics
 from swingrt.sim import collect
 from swingrt.sysid import identify
-
-
-def second_mode(l1: float, l2: float, mu: float) -> float:
-    """The faster mode [rad/s] of links l1, l2 [m] with mass ratio mu = m2/m1, the vehicle
-    held: the larger root of s² of (l1 l2 / ((1 + mu) g²)) s⁴ + ((l1 + l2)/g) s² + 1."""
-    a = l1 * l2 / ((1.0 + mu) * GRAVITY**2)
-    b = (l1 + l2) / GRAVITY
-    return math.sqrt((b + math.sqrt(b * b - 4.0 * a)) / (2.0 * a))
 
 
 def fly(spec: Any, index: int) -> dict[str, Any]:
@@ -45,8 +36,9 @@ def fly(spec: Any, index: int) -> dict[str, Any]:
     exp = spec.experiment(values, label=f"#{index}")
     train_sc = training_scenario(exp, {}, seed)
     train = collect(train_sc, progress=False)
-    mass = exp.identify.get("vehicle_mass", train_sc.to_dict()["vehicle"]["mass"])
-    wb = identify(train, method="whitebox", axes=exp.axes, vehicle_mass=mass)
+    known = case_vehicle_mass(exp, train_sc)
+    mass = {} if known is None else {"vehicle_mass": known}
+    wb = identify(train, method="whitebox", axes=exp.axes, **mass)
     w = wb.diagnostics["whitebox"]
     pendulum = {"m_q": w["vehicle_mass"], "m_p": w["payload_mass"], "l": w["length"]}
     omega, zeta = _core.swing_mode(
@@ -62,7 +54,7 @@ def fly(spec: Any, index: int) -> dict[str, Any]:
         laws["two, estimated"] = {**one, "second": {"omega": w["links"]["second_mode"], "zeta": 0}}
     if values.get("payload.kind") == "double":
         mu = values["payload.mass2"] / values["payload.mass"]
-        true = second_mode(values["payload.length"], values["payload.length2"], mu)
+        _, true, _ = _core.sysid_link_modes(values["payload.length"], values["payload.length2"], mu)
         laws["two, true"] = {**one, "second": {"omega": true, "zeta": 0.0}}
     ev = evaluation_scenario(exp, {}, seed + 1, train_sc)
     pid_trace, _ = simulate_controller(ev, "pid", axes=exp.axes)

@@ -241,6 +241,28 @@ def test_fft_recovers_frequency_and_length():
     assert abs(_core.sysid_cable_length(w / 2 / math.pi, mq, mp) - length) < 1e-12
 
 
+def test_link_modes_are_the_pinned_double_pendulum_s_and_bad_links_are_refused():
+    # Independent reference: the linearised double pendulum on a fixed pivot, M θ'' + K θ = 0.
+    g = _core.GRAVITY
+    for l1, l2, mu in [(0.4, 0.78, 0.37), (1.0, 0.3, 2.0), (0.33, 0.7, 0.45)]:
+        m1, m2 = 1.0, mu
+        mass = np.array([[(m1 + m2) * l1**2, m2 * l1 * l2], [m2 * l1 * l2, m2 * l2**2]])
+        stiff = np.diag([(m1 + m2) * g * l1, m2 * g * l2])
+        omega = np.sqrt(np.sort(np.linalg.eigvals(np.linalg.solve(mass, stiff)).real))
+        w1, w2, share = _core.sysid_link_modes(l1, l2, mu)
+        np.testing.assert_allclose([w1, w2], omega, rtol=1e-12)
+        assert share > 0.0
+    # A vanishing lower mass under a longer upper link: the upper link swings as one
+    # pendulum at √(g/l₁), and the faster mode (the lower link's own, √(g/l₂)) has no share
+    # of its answer.
+    w1, w2, share = _core.sysid_link_modes(1.0, 0.5, 1e-9)
+    np.testing.assert_allclose([w1, w2], [math.sqrt(g / 1.0), math.sqrt(g / 0.5)], rtol=1e-6)
+    assert share < 1e-6
+    for bad in [(0.0, 0.5, 0.3), (0.5, -1.0, 0.3), (0.5, 0.5, math.nan)]:
+        with pytest.raises(ConfigError, match="l1|l2|mu"):
+            _core.sysid_link_modes(*bad)
+
+
 def test_nmae_hand_computed():
     text = json.dumps(
         {

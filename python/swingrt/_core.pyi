@@ -52,6 +52,7 @@ __all__ = [
     "sysid_attitude_lag",
     "sysid_cable_length",
     "sysid_fft_peak",
+    "sysid_link_modes",
     "sysid_rls_mass",
     "sysid_smooth_gaussian",
     "sysid_smooth_quadratic",
@@ -315,6 +316,7 @@ def sysid_fft_peak(
 def sysid_cable_length(
     freq_hz: float, vehicle_mass: float, payload_mass: float, gravity: float = ...
 ) -> float: ...
+def sysid_link_modes(l1: float, l2: float, mu: float) -> tuple[float, float, float]: ...
 def sysid_attitude_lag(
     velocity: npt.NDArray[np.float64],
     swing: npt.NDArray[np.float64],

@@ -572,6 +572,22 @@ fn sysid_cable_length(freq_hz: f64, vehicle_mass: f64, payload_mass: f64, gravit
     whitebox::cable_length(freq_hz, vehicle_mass, payload_mass, gravity)
 }
 
+/// The two modes of a double pendulum with the vehicle held (upper link `l1` [m], lower
+/// `l2` [m], mass ratio `mu` = m₂/m₁): (ω₁, ω₂) [rad/s] and the second mode's share of the
+/// upper link's static answer (`swing_core::sysid::links::modes`).
+#[pyfunction]
+fn sysid_link_modes(l1: f64, l2: f64, mu: f64) -> PyResult<(f64, f64, f64)> {
+    for (field, v) in [("l1", l1), ("l2", l2), ("mu", mu)] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(to_py(swing_core::ConfigError::new(
+                field,
+                format!("must be finite and > 0, not {v}"),
+            )));
+        }
+    }
+    Ok(swing_core::sysid::links::modes(l1, l2, mu))
+}
+
 /// RLS total-mass estimates after each sample from vertical thrust and down acceleration.
 #[pyfunction]
 #[pyo3(signature = (thrust_vertical, acc_down, *, gravity=GRAVITY, forgetting=1.0, initial=1.0))]
@@ -655,6 +671,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(whitebox_payload_mass, m)?)?;
     m.add_function(wrap_pyfunction!(sysid_fft_peak, m)?)?;
     m.add_function(wrap_pyfunction!(sysid_cable_length, m)?)?;
+    m.add_function(wrap_pyfunction!(sysid_link_modes, m)?)?;
     m.add_function(wrap_pyfunction!(sysid_rls_mass, m)?)?;
     m.add_function(wrap_pyfunction!(sysid_attitude_lag, m)?)?;
     m.add_function(wrap_pyfunction!(sysid_smooth_quadratic, m)?)?;

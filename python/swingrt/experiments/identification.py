@@ -33,7 +33,7 @@ def identify_case(
     from swingrt.reports import plot_pareto
     from swingrt.sysid import identify, lqr_parameters, search, select_for_control
 
-    known = _case_vehicle_mass(exp, vehicle)
+    known = case_vehicle_mass(exp, vehicle)
     mass = {} if known is None else {"vehicle_mass": known}
     opts = {"method": "dmdc", **exp.identify, **mass}
     opts.pop("twin", None)
@@ -98,7 +98,7 @@ def case_twin(exp: Experiment, vehicle: Scenario | None) -> Scenario | str | Non
     if choice == "builtin":
         if vehicle is None:
             return "builtin"
-        mass = _case_vehicle_mass(exp, vehicle)
+        mass = case_vehicle_mass(exp, vehicle)
         if mass is None:
             mass = identify_settings()["vehicle_mass"]
         controller = vehicle.to_dict()["controller"]
@@ -110,7 +110,7 @@ def case_twin(exp: Experiment, vehicle: Scenario | None) -> Scenario | str | Non
 _WHITEBOX_KEYS = ("vehicle_mass", "payload_mass", "cable_length")
 
 
-def _case_vehicle_mass(exp: Experiment, vehicle: Scenario | None) -> float | None:
+def case_vehicle_mass(exp: Experiment, vehicle: Scenario | None) -> float | None:
     """The vehicle mass [kg] the identification of ``exp`` knows: ``[identify]
     vehicle_mass`` if given, else the mass ``vehicle`` describes, else none (the
     identification's default then)."""

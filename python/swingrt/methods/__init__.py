@@ -125,6 +125,15 @@ def _split(n: int, dt: float) -> int:
     return int(round(float(identify_settings()["test_span"]) / dt))
 
 
+def _sample_time(identify: dict[str, Any] | None) -> float:
+    """The identification's sample time [s]: ``identify``'s ``dt``, else the core's default
+    (the white-box model's, which the selection's fallback shaper is closed at)."""
+    from swingrt.sysid import identify_settings
+
+    given = (identify or {}).get("dt")
+    return float(given if given is not None else identify_settings()["dt"])
+
+
 def _suffixes(axes: str) -> list[str]:
     return ["n"] if axes == "n" else ["n", "e"]
 
@@ -170,7 +179,9 @@ def train(
         else:
             if whitebox is None:
                 raise ConfigError("shaper: source 'whitebox' needs the white-box estimate")
-            omega, zeta = _core.swing_mode(params=_pendulum(whitebox), px4=px4)
+            omega, zeta = _core.swing_mode(
+                params=_pendulum(whitebox), dt=_sample_time(identify), px4=px4
+            )
         learned: Any = (omega, zeta)
         info = {"omega": omega, "zeta": zeta, "kind": s["kind"], "source": s["source"]}
         used = t_len
@@ -191,7 +202,7 @@ def train(
         used = t_len
     elif name == "deepc":
         s = check_settings("deepc", sections.get("deepc"))
-        dt = float((identify or {}).get("dt", 0.03))
+        dt = _sample_time(identify)
         names = []
         for a in _suffixes(axes):
             names += [f"acc_sp_{a}", f"v{a}", f"swing_{a}"]
