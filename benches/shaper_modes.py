@@ -6,9 +6,11 @@ flown by PX4 PID and by the white-box model carrying each law in ``control_check
 path every flight of a selected model takes): the ZVD shaper of the first mode alone, the two
 ZVDs in series for the links the white-box found (when it found them), and the two with the
 payload's true second mode (the sample's drawn links, their rate with the vehicle held) in
-place of the estimate. Prints each law's swing excess over PX4's (the campaign's
-``swing_excess_vs_pid``) and final velocity error. ``--swing sensor`` flies the samples with
-the swing sensor instead of the spec's swing source.
+place of the estimate, and the two with the second peak of the swing's spectrum where the
+white-box reports one high enough (``second_peak``, an IMU swing's). Prints each law's
+swing excess over PX4's (the campaign's ``swing_excess_vs_pid``) and final velocity error.
+``--swing sensor`` flies the samples with the swing sensor instead of the spec's swing
+source.
 
 Run:  python benches/shaper_modes.py SPEC.toml SEED IDX[,IDX...] [--swing sensor]
 """
@@ -52,6 +54,9 @@ def fly(spec: Any, index: int) -> dict[str, Any]:
     laws = {"one mode": one}
     if w.get("links"):
         laws["two, estimated"] = {**one, "second": {"omega": w["links"]["second_mode"], "zeta": 0}}
+    peak = w.get("second_peak")
+    if peak and peak["shown"]:
+        laws["two, spectral"] = {**one, "second": {"omega": peak["omega"], "zeta": 0.0}}
     if values.get("payload.kind") == "double":
         mu = values["payload.mass2"] / values["payload.mass"]
         _, true, _ = _core.sysid_link_modes(values["payload.length"], values["payload.length2"], mu)
@@ -81,7 +86,7 @@ def main() -> None:
     if args.swing:
         raw["base"].setdefault("common", {}).setdefault("sensors", {})["swing"] = args.swing
     spec = parse_spec(raw)
-    names = ("one mode", "two, estimated", "two, true")
+    names = ("one mode", "two, estimated", "two, spectral", "two, true")
     print("| sample | payload | links found | " + " | ".join(names) + " |")
     print("|---:|---|---|" + "---|" * len(names))
     for index in (int(i) for i in args.samples.split(",")):

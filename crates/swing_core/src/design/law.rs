@@ -32,12 +32,12 @@ pub enum Law {
     #[default]
     Mpc,
     /// The input shaper of PX4's velocity setpoint for `mode`, the swing mode PX4's loop
-    /// leaves in the white-box pendulum, in series with one for `second` where the white-box
-    /// found two links.
+    /// leaves in the white-box pendulum, in series with one for `second` where the swing
+    /// shows a second mode.
     Shaper {
         /// The shaped mode.
         mode: SwingMode,
-        /// The lower link's mode of a double pendulum, shaped too.
+        /// A double pendulum's second mode, shaped too.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         second: Option<SwingMode>,
         /// The shaper's kind and period.
@@ -48,9 +48,10 @@ pub enum Law {
 impl Law {
     /// The shaper of `settings` on the white-box pendulum of `model`'s diagnostics, closed
     /// by PX4's velocity loop of `px4` at the model's sample time; `None` when the model
-    /// carries no white-box estimate. Where the white-box found two links, their second
-    /// mode is shaped too, at its rate with the vehicle held (`sysid::links::modes`): it
-    /// lies well above the vehicle's velocity loop, which moves the first mode, not it.
+    /// carries no white-box estimate. Where the swing shows a second mode
+    /// (`WhiteboxEstimates::second_mode`: the fitted links' with the vehicle held, or the
+    /// second peak of the swing's spectrum), it is shaped too, undamped: it lies well above
+    /// the vehicle's velocity loop, which moves the first mode, not it.
     pub fn whitebox_shaper(
         model: &LinearModel,
         px4: &Px4Params,
@@ -67,13 +68,9 @@ impl Law {
         };
         let mode = pendulum_swing_mode(&pendulum, model.dt, px4)?;
         let second = w
-            .links
-            .as_ref()
-            .filter(|d| d.second_mode.is_finite() && d.second_mode > mode.omega)
-            .map(|d| SwingMode {
-                omega: d.second_mode,
-                zeta: 0.0,
-            });
+            .second_mode()
+            .filter(|&omega| omega > mode.omega)
+            .map(|omega| SwingMode { omega, zeta: 0.0 });
         // The record says where the mode came from, whatever source `settings` named.
         Ok(Some(Self::Shaper {
             mode,
@@ -300,6 +297,68 @@ mod tests {
         c.step(&state, &[1.0], &mut out).unwrap();
         let first = crate::control::shaper::series(settings.kind, &[mode, second])[0].1;
         assert!((out[0] - first).abs() < 1e-12, "{} vs {first}", out[0]);
+    }
+
+    #[test]
+    fn a_second_peak_of_the_swings_spectrum_is_shaped_only_when_shown_and_no_links_were_fitted() {
+        use crate::sysid::links::DoublePendulum;
+        use crate::sysid::spectrum::SecondPeak;
+        use crate::sysid::WhiteboxEstimates;
+        let mut m = model();
+        let px4 = Px4Params::default();
+        let settings = ShaperSettings::default();
+        let peak = SecondPeak {
+            omega: 7.4,
+            first: 3.3,
+            power_ratio: 0.5,
+            shown: true,
+        };
+        let single = WhiteboxEstimates {
+            vehicle_mass: 0.952,
+            payload_mass: 0.3,
+            length: 0.9,
+            friction: 0.0,
+            ..Default::default()
+        };
+        let second_of = |w: WhiteboxEstimates, m: &mut LinearModel| {
+            m.diagnostics.whitebox = Some(w);
+            match Law::whitebox_shaper(m, &px4, &settings).unwrap() {
+                Some(Law::Shaper { second, .. }) => second.map(|s| s.omega),
+                other => panic!("not a shaper: {other:?}"),
+            }
+        };
+        let shown = WhiteboxEstimates {
+            second_peak: Some(peak),
+            ..single.clone()
+        };
+        assert_eq!(second_of(shown.clone(), &mut m), Some(7.4));
+        let faint = WhiteboxEstimates {
+            second_peak: Some(SecondPeak {
+                shown: false,
+                ..peak
+            }),
+            ..single.clone()
+        };
+        assert_eq!(second_of(faint, &mut m), None);
+        // A peak below the shaped mode is not a double pendulum's second mode.
+        let below = WhiteboxEstimates {
+            second_peak: Some(SecondPeak { omega: 1.5, ..peak }),
+            ..single.clone()
+        };
+        assert_eq!(second_of(below, &mut m), None);
+        // Fitted links say more than a peak: their mode is the one shaped.
+        let both = WhiteboxEstimates {
+            links: Some(DoublePendulum {
+                length: 0.5,
+                length2: 0.4,
+                mass_ratio: 0.5,
+                error_ratio: 0.8,
+                second_mode: 9.0,
+                mode_share: 0.2,
+            }),
+            ..shown
+        };
+        assert_eq!(second_of(both, &mut m), Some(9.0));
     }
 
     #[test]

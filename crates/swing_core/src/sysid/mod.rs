@@ -19,6 +19,7 @@ pub mod resample;
 pub mod search;
 pub mod settings;
 pub mod smooth;
+pub mod spectrum;
 pub mod stability;
 pub mod swing_scale;
 pub mod whitebox;

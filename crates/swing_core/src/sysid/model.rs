@@ -96,6 +96,10 @@ pub struct WhiteboxEstimates {
     /// the model stays a single pendulum of `length`; the vehicle's twin carries both links.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub links: Option<super::links::DoublePendulum>,
+    /// The second peak of the swing's spectrum (`sysid::spectrum`), for a swing estimated
+    /// from the IMU whose links fit found no second link.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub second_peak: Option<super::spectrum::SecondPeak>,
     /// Standard deviation of the swing sensor's white noise [rad], estimated from the
     /// training swing (`whitebox::noise_std`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -111,6 +115,23 @@ pub struct WhiteboxEstimates {
     /// [state unit per tick per m/s].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub velocity_residual: Option<Vec<f64>>,
+}
+
+impl WhiteboxEstimates {
+    /// The rate of the payload's second mode [rad/s], where the swing shows one: the
+    /// fitted links' (with the vehicle held), else the second peak of the swing's spectrum
+    /// where it is high enough.
+    pub fn second_mode(&self) -> Option<f64> {
+        let fitted = self
+            .links
+            .as_ref()
+            .map(|d| d.second_mode)
+            .filter(|w| w.is_finite() && *w > 0.0);
+        fitted.or(self
+            .second_peak
+            .filter(|p| p.shown && p.omega.is_finite())
+            .map(|p| p.omega))
+    }
 }
 
 /// Diagnostics stored with a model.

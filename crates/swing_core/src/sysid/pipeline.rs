@@ -12,6 +12,7 @@ use super::links::{self, LinkSettings};
 use super::model::LinearModel;
 use super::search::{grid_search, refine, Candidate, SearchResult};
 use super::settings::{IdentifyMethod, IdentifySettings, SearchMode};
+use super::spectrum::{self, SpectralSettings};
 use super::{dmdc, havokc, metrics, whitebox};
 use crate::plant::{PendulumModel, GRAVITY};
 
@@ -245,26 +246,30 @@ pub fn whitebox_model(
             "the white-box needs a velocity and a swing per input, got states {states:?}"
         )));
     }
+    // The axis that swings most: its swing tells the links and the spectrum.
+    let swing_axis = {
+        let std = |j: usize| {
+            let col: Vec<f64> = (0..train.len).map(|k| train.state(k)[j]).collect();
+            let mean = col.iter().sum::<f64>() / col.len().max(1) as f64;
+            (col.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / col.len().max(1) as f64).sqrt()
+        };
+        (axes..2 * axes)
+            .max_by(|a, b| std(*a).total_cmp(&std(*b)))
+            .expect("at least one axis")
+    };
+    let swing: Vec<f64> = (0..train.len).map(|k| train.state(k)[swing_axis]).collect();
     let mut links = None;
     let mut fft_length = None;
     let (length, freq) = match settings.cable_length {
         Some(l) => (l, None),
         None => {
-            let std = |j: usize| {
-                let col: Vec<f64> = (0..train.len).map(|k| train.state(k)[j]).collect();
-                let mean = col.iter().sum::<f64>() / col.len().max(1) as f64;
-                (col.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / col.len().max(1) as f64)
-                    .sqrt()
-            };
-            let j = (axes..2 * axes)
-                .max_by(|a, b| std(*a).total_cmp(&std(*b)))
-                .expect("at least one axis");
-            let swing: Vec<f64> = (0..train.len).map(|k| train.state(k)[j]).collect();
             let [lo, hi] = settings.swing_band;
             let f = whitebox::fft_peak_frequency(&swing, settings.dt, lo, hi)?;
             let l_fft = whitebox::cable_length(f, settings.vehicle_mass, payload_mass, GRAVITY);
             fft_length = Some(l_fft);
-            let v: Vec<f64> = (0..train.len).map(|k| train.state(k)[j - axes]).collect();
+            let v: Vec<f64> = (0..train.len)
+                .map(|k| train.state(k)[swing_axis - axes])
+                .collect();
             // The swing's answer to the vehicle's motion fixes the length whatever the
             // flight's spectrum; the FFT peak (eq. 4.8) stands in when that fit fails.
             let rule = if settings.imu_swing {
@@ -277,6 +282,19 @@ pub fn whitebox_model(
             (fitted.map_or(l_fft, |fit| fit.length), Some(f))
         }
     };
+    // The IMU's swing asks more of the links fit than the doubles a shaper must know of
+    // give; their second mode shows in the spectrum (`spectrum`), whatever gave the length.
+    let second_peak = (settings.imu_swing && links.is_none())
+        .then(|| {
+            let first_mode = (GRAVITY / length).sqrt();
+            spectrum::second_peak(
+                &swing,
+                settings.dt,
+                first_mode,
+                &SpectralSettings::default(),
+            )
+        })
+        .flatten();
     let params = PendulumModel {
         m_q: settings.vehicle_mass,
         m_p: payload_mass,
@@ -286,6 +304,7 @@ pub fn whitebox_model(
     let mut model = whitebox::model(&params, axes, settings.dt, freq)?;
     if let Some(wb) = model.diagnostics.whitebox.as_mut() {
         wb.links = links;
+        wb.second_peak = second_peak;
         wb.fft_length = fft_length;
         let j = (axes..2 * axes).next().expect("at least one axis");
         let swing: Vec<f64> = (0..train.len).map(|k| train.state(k)[j]).collect();

@@ -254,6 +254,7 @@ pub fn model(
         frequency_hz,
         friction: params.c,
         links: None,
+        second_peak: None,
         fft_length: None,
         swing_noise: None,
         attitude_lag: None,
