@@ -6,11 +6,14 @@ For each sample of a flown campaign (its folder), the sample is flown again as
 its evaluation flight is flown by PX4 PID and by that model's MPC with the default
 settings and with a smoother one: a larger input-rate weight (``w_acc_rate``) and a larger
 swing measurement noise (``kf_swing_measurement_noise``: the filter trusts the swing less
-above the first mode). Where the white-box recorded a second peak of the swing's spectrum
-(``whitebox.second_peak``), both are also flown with the payload replaced by the double
-pendulum whose modes with the vehicle held are the white-box's √(g/l) and that peak, with
-the heaviest lower link those two rates allow (equal lengths) and the white-box's total
-mass: a plant that carries the mode the MPC can excite unseen.
+above the first mode). The selected model may carry the selection's own smooth design
+already (``control_check.spillover``, ``diagnostics.acc_rate_weight``); its settings are
+floors, so "default" is the model as selected. Where the white-box recorded a second
+peak of the swing's spectrum (``whitebox.second_peak``), both are also flown with the
+payload replaced by the double pendulum whose modes with the vehicle held are the
+white-box's √(g/l) and that peak, with the heaviest lower link those two rates allow
+(equal lengths) and the white-box's total mass: a plant that carries the mode the MPC can
+excite unseen.
 
 Prints each flight's swing excess over PX4's (the campaign's ``swing_excess_vs_pid``), the
 command's total variation, the velocity settle time and whether the campaign would count
@@ -34,29 +37,19 @@ from swingrt.campaign.spec import parse_spec
 from swingrt.experiments import evaluation_scenario, simulate_controller, training_scenario
 from swingrt.metrics import step_metrics
 
-GRAVITY = 9.80665
-
 
 def heaviest_second_link(whitebox: dict[str, Any]) -> dict[str, Any] | None:
     """The double pendulum of the white-box's first mode and its spectrum's second peak
-    with the heaviest lower link the two rates allow, or None without a peak.
-
-    With the vehicle held, a double pendulum's modes satisfy
-    m1·l1·l2·ω⁴ − M·g·(l1 + l2)·ω² + M·g² = 0 (M = m1 + m2), so two rates fix
-    l1 + l2 = g·(ω1² + ω2²)/(ω1²ω2²) and l1·l2 = (1 + r)·g²/(ω1²ω2²) for r = m2/m1; real
-    lengths need (l1 + l2)² ≥ 4·l1·l2, and r is largest at equal lengths."""
+    with the heaviest lower link the two rates allow (equal lengths; the core's
+    ``sysid::links::heaviest_links``, the plant the selection's second link flies), or None
+    without a peak."""
     peak = whitebox.get("second_peak")
     if not peak:
         return None
-    first_sq = GRAVITY / whitebox["length"]
-    second_sq = peak["omega"] ** 2
-    length = GRAVITY * (first_sq + second_sq) / (first_sq * second_sq) / 2.0
-    ratio = (first_sq + second_sq) ** 2 / (4.0 * first_sq * second_sq) - 1.0
-    # The core's modes of these links (the selection's home of that rule) must give the
-    # two rates back, or the inversion above is wrong.
-    first, second, _ = _core.sysid_link_modes(length, length, ratio)
-    if not (math.isclose(first**2, first_sq) and math.isclose(second**2, second_sq)):
-        raise AssertionError(f"links {length} m, ratio {ratio} give {first}, {second} rad/s")
+    links = _core.sysid_heaviest_links(math.sqrt(_core.GRAVITY / whitebox["length"]), peak["omega"])
+    if links is None:
+        return None
+    length, ratio = links
     mass = whitebox["payload_mass"]
     return {
         "kind": "double",

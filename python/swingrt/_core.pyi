@@ -53,6 +53,7 @@ __all__ = [
     "sysid_cable_length",
     "sysid_fft_peak",
     "sysid_link_modes",
+    "sysid_heaviest_links",
     "sysid_rls_mass",
     "sysid_smooth_gaussian",
     "sysid_smooth_quadratic",
@@ -317,6 +318,7 @@ def sysid_cable_length(
     freq_hz: float, vehicle_mass: float, payload_mass: float, gravity: float = ...
 ) -> float: ...
 def sysid_link_modes(l1: float, l2: float, mu: float) -> tuple[float, float, float]: ...
+def sysid_heaviest_links(omega1: float, omega2: float) -> tuple[float, float] | None: ...
 def sysid_attitude_lag(
     velocity: npt.NDArray[np.float64],
     swing: npt.NDArray[np.float64],

@@ -676,6 +676,7 @@ def select_for_control(
     slow_motor_lag: float | None = None,
     slow_inertia: float | None = None,
     wander_sigmas: float | None = None,
+    spillover: Mapping[str, float] | None = None,
     fallback: str | None = None,
     check: tuple[LinearModel, str] | None = None,
     **settings: Any,
@@ -742,6 +743,14 @@ def select_for_control(
     time constant ``slow_motor_lag`` [s] (default 0.04, where slower than its own) and
     ``slow_inertia`` times its inertia (default 1.5), what the twin does not know of the
     attitude loop (``checked[*].slow_vehicle_miss``; 0 and 1 fly none).
+    Where the white-box recorded a second peak of the swing's spectrum
+    (``diagnostics['whitebox']['second_peak']``, a lower mode it did not fit), a pick that
+    passed also flies the twin's step with its payload as the heaviest double pendulum of
+    the two rates; where it does not settle there, it is designed smoother
+    (``spillover``: ``acc_rate_factor`` times the MPC's input-rate weight, default 4, and a
+    swing measurement noise of at least ``swing_noise`` rad, default 0.05), and the smooth
+    design flies when it passes every flight again and settles there (the model carries it:
+    ``diagnostics['acc_rate_weight']``; ``control_check['spillover']``; 1 and 0 fly none).
     When no candidate's MPC passes, the ``fallback`` law (default ``"zvd"``; ``"zv"``, or
     ``"none"`` for none) flies the same twin flights: the input shaper of PX4's velocity
     setpoint on the white-box pendulum (:mod:`swing_core::design::law`), judged like a
@@ -776,6 +785,7 @@ def select_for_control(
         "slow_motor_lag": slow_motor_lag,
         "slow_inertia": slow_inertia,
         "wander_sigmas": wander_sigmas,
+        "spillover": None if spillover is None else dict(spillover),
         "fallback": fallback,
     }
     selection = {k: v for k, v in given.items() if v is not None} | {"plant_label": label}

@@ -588,6 +588,14 @@ fn sysid_link_modes(l1: f64, l2: f64, mu: f64) -> PyResult<(f64, f64, f64)> {
     Ok(swing_core::sysid::links::modes(l1, l2, mu))
 }
 
+/// The links with the heaviest lower mass whose modes with the vehicle held are `omega1` <
+/// `omega2` [rad/s]: (l, μ), both links l [m] long and μ = m₂/m₁, or `None`
+/// (`swing_core::sysid::links::heaviest_links`).
+#[pyfunction]
+fn sysid_heaviest_links(omega1: f64, omega2: f64) -> Option<(f64, f64)> {
+    swing_core::sysid::links::heaviest_links(omega1, omega2)
+}
+
 /// RLS total-mass estimates after each sample from vertical thrust and down acceleration.
 #[pyfunction]
 #[pyo3(signature = (thrust_vertical, acc_down, *, gravity=GRAVITY, forgetting=1.0, initial=1.0))]
@@ -672,6 +680,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sysid_fft_peak, m)?)?;
     m.add_function(wrap_pyfunction!(sysid_cable_length, m)?)?;
     m.add_function(wrap_pyfunction!(sysid_link_modes, m)?)?;
+    m.add_function(wrap_pyfunction!(sysid_heaviest_links, m)?)?;
     m.add_function(wrap_pyfunction!(sysid_rls_mass, m)?)?;
     m.add_function(wrap_pyfunction!(sysid_attitude_lag, m)?)?;
     m.add_function(wrap_pyfunction!(sysid_smooth_quadratic, m)?)?;

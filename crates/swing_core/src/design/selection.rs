@@ -33,7 +33,10 @@
 //! so the choice is the one-by-one loop's on any number of cores. A pick that passed on a
 //! twin then has its disturbance estimate's rate designed on the twin's gust
 //! (`disturbance_factors`, [`TwinPlant::gust`]): a raised rate that passes every flight
-//! again flies when the gust leaves less swing.
+//! again flies when the gust leaves less swing. Where the swing's spectrum shows a trace of
+//! a second mode the white-box did not fit, the pick then flies the twin with the heaviest
+//! second link of the two rates, and is designed smoother where it misses there
+//! ([`Spillover`]).
 //!
 //! When no candidate's MPC passes and a twin is given, the `fallback` law — the input
 //! shaper of PX4's velocity setpoint on the white-box pendulum (`design::law`) — flies the
@@ -363,6 +366,9 @@ pub struct SelectionSettings {
     /// two-sided 0.1 % point of the normal, so the noise alone ends at most one flight in a
     /// thousand past it (a flight's steady-state error is a 2 s mean, as the wander is).
     pub wander_sigmas: f64,
+    /// The smoother MPC a pick flies where its command would drive a lower mode the
+    /// white-box did not fit ([`Spillover`]).
+    pub spillover: Spillover,
     /// What the plant of the check is and where its parameters came from, written into the
     /// diagnostics as `control_check.plant` (e.g. `whitebox(payload mass 0.2 kg from thrust)`).
     pub plant_label: String,
@@ -408,6 +414,90 @@ impl Fallback {
     }
 }
 
+/// The second link a swing's spectrum allows, as a plant, and the smoother MPC a pick flies
+/// where its own command would drive that link (`SelectionSettings::spillover`).
+///
+/// The white-box fits one pendulum to a double whose lower link PX4's training flight
+/// barely excites: a light upper mass over a heavier lower one swings at the pair's common
+/// mode, and the lower mode leaves only a trace in the swing's spectrum
+/// (`whitebox.second_peak`, below the shaper's `min_ratio`). The twin is then that one
+/// pendulum, the pick passes on it, and on the vehicle its gain above the first mode can
+/// drive the lower mode into a cycle that never settles (`robustness-imu` seed 6, samples
+/// 13 and 169: 0.08 kg on 0.40 m over 0.16 kg on 0.59 m, 0.06 kg on 0.37 m over 0.11 kg on
+/// 0.42 m; the command cycled at 12.5 rad/s, their spectral peaks at 11.0 and 11.8). Where
+/// the white-box recorded a second peak, the pick also flies the twin's step with its
+/// payload as the heaviest double pendulum of the two rates
+/// ([`TwinPlant::with_second_link`]), and holds it. A pick that settles there within the
+/// twin's bounds flies as chosen; one that does not is designed again smoother — its
+/// input-rate weight `acc_rate_factor` times the MPC's, its swing channels' Kalman
+/// measurement noise at least `swing_noise` — and the smooth design flies when it passes
+/// every flight of the selection again and misses the second link's bounds less
+/// ([`choose_spillover`], `control_check.spillover`). Smoothing every pick instead rights as many
+/// flights as it breaks (seed 6: of its 267 MPC samples it righted 13, 169, 16 and 145 and
+/// broke 15, 122, 185, 62 and 208).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Spillover {
+    /// The smooth design's input-rate weight, as a multiple of the MPC's
+    /// (`MpcSettings::w_acc_rate`) [×]; with this 1 and `swing_noise` 0 no second link is
+    /// flown.
+    pub acc_rate_factor: f64,
+    /// The smooth design's swing-channel Kalman measurement noise, at least [rad]: the
+    /// filter trusts the swing less above the first mode.
+    pub swing_noise: f64,
+}
+
+impl Default for Spillover {
+    fn default() -> Self {
+        // Chosen on robustness-imu seed 6's eight samples whose pick misses the second link
+        // (13, 169, 201, 247, 114, 263, 276, 208). Twice the weight with the noise: the
+        // smooth design passes and settles there on all but 263 (which keeps its pick), and
+        // 13 and 169 fly 0.18× and 0.03× PX4's swing against 1.57× and 1.64× unsettled;
+        // 208 (a single payload, its gust at 19.3 s of 30) ends 1 % off the setpoint with
+        // it and with the weight alone. Four times the weight is refused on the twin's
+        // settle time at 13 (6.25 s against 6); the noise alone rights neither 169 nor 201.
+        Self {
+            acc_rate_factor: 2.0,
+            swing_noise: 0.05,
+        }
+    }
+}
+
+impl Spillover {
+    /// Whether a smooth design differs from the pick's at all.
+    fn active(&self) -> bool {
+        self.acc_rate_factor > 1.0 || self.swing_noise > 0.0
+    }
+
+    /// `model` carrying the smooth design (as floors the MPC's settings are raised to).
+    fn smooth(
+        &self,
+        model: &LinearModel,
+        mpc_settings: &MpcSettings,
+    ) -> Result<LinearModel, ControlError> {
+        let own = crate::control::mpc::settings_for(model, mpc_settings.clone())?;
+        let mut m = model.clone();
+        if self.acc_rate_factor > 1.0 && own.w_acc_rate > 0.0 {
+            m.diagnostics.acc_rate_weight = Some(own.w_acc_rate * self.acc_rate_factor);
+        }
+        if self.swing_noise > own.swing_measurement_noise() {
+            m.diagnostics.swing_measurement_noise = Some(self.swing_noise);
+        }
+        Ok(m)
+    }
+}
+
+/// Whether the smooth design flies (`SelectionSettings::spillover`): only where the pick as
+/// designed misses the second link's bounds (`pick_miss` > 1, [`TwinBounds::miss`] of its
+/// step and hold), and then when the smooth design (`smooth`: whether it passed every
+/// flight of the selection, its miss there) passed and misses less. The second link is the
+/// heaviest the spectrum allows, a worst case: the smooth design need not settle there
+/// within bounds to be the better of the two (seed 6's 13: the pick misses 7.0, the
+/// smooth design 1.03, and flies 0.21× PX4's swing on the vehicle against 1.57×).
+pub fn choose_spillover(pick_miss: f64, smooth: Option<(bool, f64)>) -> bool {
+    pick_miss > 1.0 && smooth.is_some_and(|(passed, miss)| passed && miss < pick_miss)
+}
+
 impl Default for SelectionSettings {
     fn default() -> Self {
         Self {
@@ -442,6 +532,7 @@ impl Default for SelectionSettings {
             slow_motor_lag: 0.04,
             slow_inertia: 1.5,
             wander_sigmas: 3.29,
+            spillover: Spillover::default(),
             plant_label: "whitebox".into(),
             fallback: Fallback::Zvd,
         }
@@ -504,6 +595,13 @@ impl SelectionSettings {
                 "must be a multiple of the twin's inertia of at least 1",
             ));
         }
+        if !(self.spillover.acc_rate_factor >= 1.0 && self.spillover.acc_rate_factor.is_finite()) {
+            return Err(ConfigError::new(
+                "spillover.acc_rate_factor",
+                "must be a multiple of the MPC's input-rate weight of at least 1",
+            ));
+        }
+        non_negative("spillover.swing_noise", self.spillover.swing_noise)?;
         non_negative("twin_bounds.swing_vs_pid", self.twin_bounds.swing_vs_pid)?;
         non_negative(
             "twin_bounds.swing_excess_min",
@@ -1301,6 +1399,34 @@ pub fn select_for_control(
         }
         _ => None,
     };
+    // The second link the swing's spectrum allows, for a pick that passed: flown there, and
+    // designed smoother where it does not settle.
+    let peak = plant
+        .diagnostics
+        .whitebox
+        .as_ref()
+        .and_then(|w| w.second_peak.as_ref())
+        .map(|p| p.omega);
+    let second_link = match (twin, peak) {
+        (Some(tw), Some(omega)) if mpc_passed && settings.spillover.active() => {
+            tw.with_second_link(omega)?
+        }
+        _ => None,
+    };
+    let spillover = match &second_link {
+        Some(link) => {
+            let (designed, report) = design_spillover(
+                model,
+                mpc_settings,
+                link,
+                settings,
+                |m: &LinearModel, mpc: MpcController| evaluate(m, mpc).map(|(_, v)| v),
+            )?;
+            model = designed;
+            Some(report)
+        }
+        None => None,
+    };
     let selected = search
         .table
         .iter()
@@ -1345,6 +1471,7 @@ pub fn select_for_control(
             })),
             "wander": wander,
             "disturbance_design": disturbance_design,
+            "spillover": spillover,
             "payload_tolerance": settings.payload_tolerance,
             "slow_vehicle": slow_twin.as_ref().map(|tw| tw.label()),
             "checked": checked.iter().map(checked_json).collect::<Vec<_>>(),
@@ -1461,6 +1588,73 @@ fn design_disturbance(
         })).collect::<Vec<_>>(),
     });
     let (_, model) = designs.swap_remove(chosen);
+    Ok((model, report))
+}
+
+/// The pick `model` (passed) flown on the second link `link` ([`TwinPlant::with_second_link`]:
+/// the step and its hold) and, where it misses their bounds, designed smoother
+/// ([`Spillover::smooth`]): the smooth design replaces it when it misses less there and
+/// passes every flight of the selection again, as [`choose_spillover`] rules. Returns
+/// the model, carrying the smooth design when taken, and the report for
+/// `control_check.spillover`. `judge_flights` flies a design on every flight of the
+/// selection and judges it.
+fn design_spillover(
+    model: LinearModel,
+    mpc_settings: &MpcSettings,
+    link: &TwinPlant,
+    settings: &SelectionSettings,
+    judge_flights: impl Fn(&LinearModel, MpcController) -> Result<Verdict, ControlError>,
+) -> Result<(LinearModel, serde_json::Value), ControlError> {
+    // The step and its hold: the lower mode's cycle can grow too slowly for the step alone
+    // (seed 6's 13 settles there within 20 s and cycles by 30 s).
+    let miss = |mpc: MpcController| -> Result<f64, ControlError> {
+        let step = link.fly_with(Box::new(mpc.fresh_copy()?))?;
+        let f = step.flight;
+        let hold = if settings.twin_bounds.admit(&f, &settings.bounds) {
+            Some(link.hold_on(step, Box::new(mpc))?)
+        } else {
+            None
+        };
+        Ok(settings
+            .twin_bounds
+            .miss(&f, hold.as_ref(), &settings.bounds))
+    };
+    let pick_miss = miss(MpcController::new(&model, mpc_settings.clone())?)?;
+    let finite = |x: f64| x.is_finite().then_some(x);
+    let mut smooth = None;
+    let mut tried = None;
+    if pick_miss > 1.0 {
+        let designed = settings.spillover.smooth(&model, mpc_settings)?;
+        let mpc = MpcController::new(&designed, mpc_settings.clone())?;
+        // The second link first: a design that misses more there is not flown again.
+        let smooth_miss = miss(mpc.fresh_copy()?)?;
+        let verdict = if smooth_miss < pick_miss {
+            Some(judge_flights(&designed, mpc)?)
+        } else {
+            None
+        };
+        let passed = verdict.as_ref().is_some_and(Verdict::passed);
+        let flown = crate::control::mpc::settings_for(&designed, mpc_settings.clone())?;
+        tried = Some(json!({
+            "w_acc_rate": flown.w_acc_rate,
+            "kf_swing_measurement_noise": flown.swing_measurement_noise(),
+            "miss": finite(smooth_miss),
+            "passed": passed,
+            "refused": verdict.map(|v| v.reasons()),
+        }));
+        smooth = Some((passed, smooth_miss, designed));
+    }
+    let take = choose_spillover(pick_miss, smooth.as_ref().map(|(p, m, _)| (*p, *m)));
+    let report = json!({
+        "plant": link.label(),
+        "miss": finite(pick_miss),
+        "smooth": tried,
+        "smoothed": take,
+    });
+    let model = match smooth {
+        Some((_, _, designed)) if take => designed,
+        _ => model,
+    };
     Ok((model, report))
 }
 
@@ -2145,6 +2339,70 @@ mod tests {
             ..trial(2.5, true, None)
         };
         assert_eq!(choose_disturbance(&[pick, diverged], &s), 0);
+    }
+
+    #[test]
+    fn a_smoother_design_flies_only_where_the_pick_misses_the_second_link_and_it_does_better() {
+        // The pick settles on the second link: it flies as chosen, whatever the smooth one.
+        assert!(!choose_spillover(1.0, Some((true, 0.5))));
+        assert!(!choose_spillover(0.3, None));
+        // It misses there: a smooth design that passed and misses less flies, within the
+        // bounds there or not (the second link is a worst case) ...
+        assert!(choose_spillover(7.0, Some((true, 1.03))));
+        assert!(choose_spillover(2.9, Some((true, 0.65))));
+        // ... not one that failed a flight of the selection, nor one that misses as much.
+        assert!(!choose_spillover(7.0, Some((false, 0.5))));
+        assert!(!choose_spillover(2.0, Some((true, 2.0))));
+        assert!(!choose_spillover(
+            f64::INFINITY,
+            Some((true, f64::INFINITY))
+        ));
+        assert!(!choose_spillover(3.0, None));
+    }
+
+    #[test]
+    fn the_smooth_design_raises_the_pick_s_input_rate_weight_and_swing_noise_as_floors() {
+        let model =
+            crate::design::fixtures::template(&crate::sim::Scenario::builtin("training").unwrap());
+        let mpc = MpcSettings::default();
+        let sp = Spillover::default();
+        let smooth = sp.smooth(&model, &mpc).unwrap();
+        let flown = crate::control::mpc::settings_for(&smooth, mpc.clone()).unwrap();
+        assert_eq!(flown.w_acc_rate, sp.acc_rate_factor * mpc.w_acc_rate);
+        assert_eq!(flown.swing_measurement_noise(), sp.swing_noise);
+        // A pick that already assumes more swing noise keeps it; the weight is a factor
+        // on what the pick flies with.
+        let mut noisy = model.clone();
+        noisy.diagnostics.swing_measurement_noise = Some(0.1);
+        noisy.diagnostics.acc_rate_weight = Some(10.0);
+        let flown =
+            crate::control::mpc::settings_for(&sp.smooth(&noisy, &mpc).unwrap(), mpc).unwrap();
+        assert_eq!(flown.swing_measurement_noise(), 0.1);
+        assert_eq!(flown.w_acc_rate, 10.0 * sp.acc_rate_factor);
+        // Off: nothing to design.
+        let off = Spillover {
+            acc_rate_factor: 1.0,
+            swing_noise: 0.0,
+        };
+        assert!(!off.active() && sp.active());
+        for bad in [0.5, f64::NAN, f64::INFINITY] {
+            let s = SelectionSettings {
+                spillover: Spillover {
+                    acc_rate_factor: bad,
+                    ..sp
+                },
+                ..Default::default()
+            };
+            assert!(s.validate().is_err(), "{bad}");
+        }
+        let s = SelectionSettings {
+            spillover: Spillover {
+                swing_noise: -0.1,
+                ..sp
+            },
+            ..Default::default()
+        };
+        assert!(s.validate().is_err());
     }
 
     #[test]

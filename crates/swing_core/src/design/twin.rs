@@ -260,6 +260,38 @@ impl TwinPlant {
         Self::flown(sc, self.step, self.axes, label, false)
     }
 
+    /// This twin with its single payload replaced by the double pendulum of the same mass
+    /// whose two modes (the vehicle held) are its pendulum's √(g/l) and `omega2` [rad/s],
+    /// with the heaviest lower link those rates allow ([`crate::sysid::links::heaviest_links`]):
+    /// the plant of the selection's second link (`SelectionSettings::spillover`), a lower
+    /// mode the white-box did not fit but the swing's spectrum shows a trace of. `None`
+    /// when the twin already carries two links or `omega2` is not above its pendulum's mode.
+    pub fn with_second_link(&self, omega2: f64) -> Result<Option<Self>, ConfigError> {
+        let p = &self.scenario.payload;
+        if p.kind != PayloadKind::Single {
+            return Ok(None);
+        }
+        let omega1 = (crate::plant::GRAVITY / p.length).sqrt();
+        let Some((length, mu)) = crate::sysid::links::heaviest_links(omega1, omega2) else {
+            return Ok(None);
+        };
+        let mut sc = self.scenario.clone();
+        let total = sc.payload.mass;
+        sc.payload.kind = PayloadKind::Double;
+        sc.payload.mass = total / (1.0 + mu);
+        sc.payload.mass2 = total * mu / (1.0 + mu);
+        sc.payload.length = length;
+        sc.payload.length2 = length;
+        sc.validate()
+            .map_err(|e| ConfigError::new("twin", format!("twin scenario: {e}")))?;
+        let label = format!(
+            "{} with its payload as the double pendulum of modes {omega1:.2} and {omega2:.2} \
+             rad/s ({:.3} kg over {:.3} kg, both links {length:.2} m)",
+            self.label, sc.payload.mass, sc.payload.mass2
+        );
+        Self::flown(sc, self.step, self.axes, label, false).map(Some)
+    }
+
     /// This twin with a slower attitude loop: its motors' time constant `motor_tau` [s]
     /// and its inertia `inertia`× its own (the twin's motors and mass distribution are the
     /// built-in's, which a user rarely knows better): the plant of the selection's slow
@@ -706,6 +738,32 @@ mod tests {
         for bad in [0.0, -1.0, f64::NAN] {
             assert!(twin.with_payload_lengths(bad).is_err(), "{bad}");
         }
+    }
+
+    #[test]
+    fn a_twin_with_a_second_link_carries_the_payload_s_mass_on_links_of_the_two_modes() {
+        let (_, _, twin) = builtin_twin();
+        let p = twin.scenario.payload.clone();
+        let omega1 = (crate::plant::GRAVITY / p.length).sqrt();
+        let two = twin
+            .with_second_link(11.0)
+            .unwrap()
+            .expect("a mode above the pendulum's");
+        let q = &two.scenario.payload;
+        assert_eq!(q.kind, PayloadKind::Double);
+        assert!((q.mass + q.mass2 - p.mass).abs() < 1e-12, "{q:?}");
+        assert_eq!(q.length, q.length2);
+        // Its modes with the vehicle held, by the links' own rule, are the two rates.
+        let (w1, w2, _) = crate::sysid::links::modes(q.length, q.length2, q.mass2 / q.mass);
+        assert!(
+            (w1 - omega1).abs() < 1e-9 && (w2 - 11.0).abs() < 1e-9,
+            "{w1} {w2}"
+        );
+        assert!(two.pid.get().is_none());
+        assert_eq!(two.scenario.vehicle, twin.scenario.vehicle);
+        // No second link below the first mode, nor on a twin that has two already.
+        assert!(twin.with_second_link(0.5 * omega1).unwrap().is_none());
+        assert!(two.with_second_link(20.0).unwrap().is_none());
     }
 
     #[test]

@@ -329,6 +329,23 @@ pub fn modes(l1: f64, l2: f64, mu: f64) -> (f64, f64, f64) {
     ((-x1).sqrt(), (-x2).sqrt(), share)
 }
 
+/// The links with the heaviest lower mass whose two modes (the vehicle held) are `omega1` <
+/// `omega2` [rad/s]: (l, μ) with both links l long and μ = m₂/m₁, or `None` unless
+/// 0 < `omega1` < `omega2`. The two rates fix l₁ + l₂ = g (ω₁² + ω₂²)/(ω₁² ω₂²) and
+/// l₁ l₂ = (1 + μ) g²/(ω₁² ω₂²); real lengths need (l₁ + l₂)² ≥ 4 l₁ l₂, so μ is largest at
+/// equal lengths: μ = (ω₁² + ω₂²)²/(4 ω₁² ω₂²) − 1. The plant of the selection's second
+/// link (`design::twin::TwinPlant::with_second_link`): of all links a swing's two rates
+/// allow, the one whose lower mode an MPC excites most.
+pub fn heaviest_links(omega1: f64, omega2: f64) -> Option<(f64, f64)> {
+    if !(omega1.is_finite() && omega2.is_finite() && 0.0 < omega1 && omega1 < omega2) {
+        return None;
+    }
+    let (x1, x2) = (omega1 * omega1, omega2 * omega2);
+    let length = GRAVITY * (x1 + x2) / (2.0 * x1 * x2);
+    let mu = (x1 + x2).powi(2) / (4.0 * x1 * x2) - 1.0;
+    (length.is_finite() && mu.is_finite() && mu > 0.0).then_some((length, mu))
+}
+
 /// Coefficients of physical links (inverse of [`links`]).
 fn from_links(l1: f64, l2: f64, mu: f64) -> Coefficients {
     let g2 = GRAVITY * GRAVITY;
@@ -482,6 +499,36 @@ pub fn fit(v: &[f64], theta: &[f64], dt: f64, settings: &LinkSettings) -> Option
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_heaviest_links_of_two_rates_have_those_modes_and_no_heavier_lower_mass() {
+        for (w1, w2) in [(3.283, 11.0), (2.0, 2.5), (5.0, 12.0), (1.2, 9.0)] {
+            let (l, mu) = heaviest_links(w1, w2).expect("two rates");
+            let (m1, m2, _) = modes(l, l, mu);
+            assert!((m1 - w1).abs() < 1e-9 * w1, "{m1} for {w1}");
+            assert!((m2 - w2).abs() < 1e-9 * w2, "{m2} for {w2}");
+            // Unequal links of the same two rates carry a lighter lower mass: with
+            // l₁ = l(1 − e), l₂ = l(1 + e) the product falls by 1 − e², and μ with it.
+            for e in [0.1, 0.3] {
+                let (a, b) = (l * (1.0 - e), l * (1.0 + e));
+                let mu_e = (1.0 + mu) * (1.0 - e * e) - 1.0;
+                if mu_e > 0.0 {
+                    let (n1, n2, _) = modes(a, b, mu_e);
+                    assert!((n1 - w1).abs() < 1e-9 * w1 && (n2 - w2).abs() < 1e-9 * w2);
+                    assert!(mu_e < mu);
+                }
+            }
+        }
+        for (w1, w2) in [
+            (3.0, 3.0),
+            (4.0, 3.0),
+            (0.0, 3.0),
+            (f64::NAN, 3.0),
+            (1.0, f64::INFINITY),
+        ] {
+            assert_eq!(heaviest_links(w1, w2), None, "{w1}, {w2}");
+        }
+    }
 
     #[test]
     fn mode_rates_of_equal_links_match_the_closed_form() {

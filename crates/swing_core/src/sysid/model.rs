@@ -167,6 +167,12 @@ pub struct Diagnostics {
     /// disturbance design, on the twin's gust flight.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub disturbance_noise: Option<f64>,
+    /// Weight of the acceleration command's change (`MpcSettings::w_acc_rate`) an MPC on
+    /// this model uses at least: set by the control-relevant selection's second-link design
+    /// (`SelectionSettings::spillover`), where the pick's command would drive a lower mode
+    /// the model does not carry.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub acc_rate_weight: Option<f64>,
     /// Anything else callers attach (search table, sweep settings …).
     #[serde(flatten)]
     pub extra: serde_json::Map<String, serde_json::Value>,
@@ -360,6 +366,7 @@ impl LinearModel {
                 self.diagnostics.swing_measurement_noise,
             ),
             ("disturbance_noise", self.diagnostics.disturbance_noise),
+            ("acc_rate_weight", self.diagnostics.acc_rate_weight),
         ] {
             if let Some(r) = r {
                 if !(r.is_finite() && r > 0.0) {

@@ -290,7 +290,9 @@ pub(crate) fn check_model(model: &LinearModel) -> Result<(usize, usize, usize), 
 
 /// `settings` checked, with the Kalman measurement noise and the disturbances' process noise
 /// raised to what the model carries (a model selected on noisy data says how much noise its
-/// estimator must assume, one designed against a gust how fast its disturbances move).
+/// estimator must assume, one designed against a gust how fast its disturbances move), and
+/// the input-rate weight too (one designed against an unseen second link how smooth its
+/// command must be).
 pub(crate) fn settings_for(
     model: &LinearModel,
     settings: MpcSettings,
@@ -309,6 +311,10 @@ pub(crate) fn settings_for(
     if let Some(q) = model.diagnostics.disturbance_noise {
         positive("disturbance_noise", q)?;
         settings.kf_disturbance_noise = settings.kf_disturbance_noise.max(q);
+    }
+    if let Some(w) = model.diagnostics.acc_rate_weight {
+        positive("acc_rate_weight", w)?;
+        settings.w_acc_rate = settings.w_acc_rate.max(w);
     }
     Ok(settings)
 }
