@@ -57,6 +57,7 @@ IDENT_COLUMNS = (
     "wb_payload_mass",
     "wb_length",
     "wb_attitude_lag",
+    "spillover",
 )
 #: The swing IAE's excess above its momentum floor (a ``metrics.csv`` column).
 EXCESS = "swing_excess_iae_deg_s"
@@ -204,6 +205,7 @@ def _prepare(raw: dict[str, Any], index: int, out: Path | None) -> _Prepared:
             "wb_payload_mass": None if s.lqr is None else s.lqr["m_p"],
             "wb_length": None if s.lqr is None else s.lqr["l"],
             "wb_attitude_lag": None if wb is None else _attitude_lag(wb),
+            "spillover": _spillover(cc),
         }
         if out is not None:
             s.train.to_parquet(out / "training.parquet")
@@ -230,6 +232,15 @@ def _prepare(raw: dict[str, Any], index: int, out: Path | None) -> _Prepared:
                 raise
             s.method_errors[ctrl] = f"{type(exc).__name__}: {exc}"
     return s
+
+
+def _spillover(cc: dict[str, Any] | None) -> str | None:
+    """What the selection's second link (``control_check.spillover``) did to the pick:
+    ``"kept"`` (flown as chosen) or ``"smoothed"``; None where no second link was flown."""
+    report = None if cc is None else cc.get("spillover")
+    if report is None:
+        return None
+    return "smoothed" if report.get("smoothed") else "kept"
 
 
 def _fly_evaluation(

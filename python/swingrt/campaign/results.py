@@ -37,6 +37,7 @@ _TYPES = {
     "wb_payload_mass": "float64",
     "wb_length": "float64",
     "wb_attitude_lag": "float64",
+    "spillover": "string",
     "fallback": "string",
     "error": "string",
     "failure": "string",
