@@ -499,7 +499,7 @@ def test_a_pick_whose_command_cycles_an_unseen_lower_link_is_flown_smoother(tmp_
     assert "double pendulum of modes" in spill["plant"], spill
     assert model["acc_rate_weight"] == spill["smooth"]["w_acc_rate"] > 6.0, model
     assert mpc["failure"] == "" and mpc["swing_excess_vs_pid"] < 0.2, mpc
-    assert spill["smooth"]["worst_miss"] == 1.0 and mpc["spillover"] == "smoothed", spill
+    assert spill["smooth"]["nominal_miss"] == 1.0 and mpc["spillover"] == "smoothed", spill
     model, mpc = flown["off"]
     assert model["control_check"]["spillover"] is None
     assert "acc_rate_weight" not in model and mpc["spillover"] is None
