@@ -1163,11 +1163,12 @@ pub fn select_for_control(
         }
         Ok((figures, judge(&figures, pid, settings)))
     };
-    let evaluate = |model: &LinearModel, mpc: MpcController| {
+    // An MPC's figures and verdict, its flights flying fresh copies of `mpc`.
+    let evaluate = |model: &LinearModel, mpc: MpcController, every: bool| {
         let fresh = || -> Result<Box<dyn SwingController>, ControlError> {
             Ok(Box::new(mpc.fresh_copy()?))
         };
-        evaluate_law(&fresh, Some((model, &mpc)), false)
+        evaluate_law(&fresh, Some((model, &mpc)), every)
     };
     // The Kalman measurement noise designed against the flight's swing noise: the first
     // factor whose predicted wander is within the target, else the least wandering.
@@ -1260,7 +1261,7 @@ pub fn select_for_control(
             }
         }
         let (model, mpc) = design_noise(model, factors)?;
-        let (figures, verdict) = evaluate(&model, mpc)?;
+        let (figures, verdict) = evaluate(&model, mpc, false)?;
         let candidate = CheckedCandidate {
             law: Law::Mpc,
             model: Some(SearchModel {
@@ -1407,7 +1408,7 @@ pub fn select_for_control(
                 tw,
                 settings,
                 |m: &LinearModel, mpc: MpcController| {
-                    evaluate(m, mpc).map(|(_, verdict)| verdict.passed())
+                    evaluate(m, mpc, false).map(|(_, verdict)| verdict.passed())
                 },
             )?;
             model = designed;
@@ -1437,10 +1438,7 @@ pub fn select_for_control(
                 link,
                 settings,
                 |m: &LinearModel, mpc: MpcController| {
-                    let fresh = || -> Result<Box<dyn SwingController>, ControlError> {
-                        Ok(Box::new(mpc.fresh_copy()?))
-                    };
-                    let (figures, verdict) = evaluate_law(&fresh, Some((m, &mpc)), true)?;
+                    let (figures, verdict) = evaluate(m, mpc, true)?;
                     Ok((figures.worst_miss(&verdict, settings), verdict))
                 },
             )?;
