@@ -1163,6 +1163,47 @@ fn velocity_wander_matches_a_seeded_noise_simulation() {
     assert!(w.is_infinite(), "{w}");
 }
 
+/// The wander is computed on the block of the loop that reaches the velocity, and that is
+/// the whole loop's figure: on a 12-delay model the frames the filter never reads fall out
+/// (the block is smaller than the loop), and the stationary covariance of the whole loop
+/// gives the same 2 s-mean standard deviation to rounding, with and without a lag.
+#[test]
+fn the_wander_of_the_block_that_reaches_the_velocity_is_the_whole_loop_s() {
+    use swing_core::design::check::{lagged_noise_loop, velocity_wander, MeasurementNoise};
+    use swing_core::linalg::{stationary_covariance, window_mean_std, Stationary};
+    let model = truncated_flight_model();
+    let plant = delay_model(&params(0.2, 1.0), TS, 2, 3).unwrap();
+    let noise = MeasurementNoise {
+        velocity: 0.0,
+        swing: 0.01,
+        swing_rate: 0.0,
+    };
+    let span = 2.0;
+    let mpc = MpcController::new(&model, unbounded()).unwrap();
+    for input_lag in [0.0, 0.1] {
+        let lag = swing_core::linalg::lag_factor(input_lag, TS);
+        let nl = lagged_noise_loop(&mpc, &model, &plant, lag).unwrap();
+        let (kept, rest) = swing_core::linalg::split_reaching(&nl.a, &[0]);
+        assert!(!rest.is_empty() && kept.len() + rest.len() == nl.a.nrows());
+        // The whole loop, the swing noise on the frame's swing column (the velocity's
+        // noise is zero).
+        let mut bw = nl.b.clone();
+        bw.column_mut(0).fill(0.0);
+        bw.column_mut(1).scale_mut(noise.swing);
+        let Some(Stationary::Stable(p)) = stationary_covariance(&nl.a, &bw) else {
+            panic!("the loop is stable");
+        };
+        let mut c = nalgebra::DMatrix::zeros(1, nl.a.ncols());
+        c[(0, 0)] = 1.0;
+        let whole = window_mean_std(&nl.a, &p, &c, (span / TS).round() as usize);
+        let split = velocity_wander(&mpc, &model, &plant, input_lag, noise, span).unwrap();
+        assert!(
+            (split - whole).abs() <= 1e-9 * whole,
+            "lag {input_lag}: {split} vs the whole loop's {whole}"
+        );
+    }
+}
+
 /// The swing channel's Kalman measurement noise is the selection's design variable: setting
 /// it (the velocity channel's unchanged) moves the wander the swing-sensor noise drives, a
 /// model carrying a raised one gives every MPC built on it at least that noise (the same

@@ -727,7 +727,10 @@ pub fn actuated_stable(
     actuator: Actuator,
 ) -> Result<bool, ControlError> {
     let nl = actuated_noise_loop(mpc, controller, plant, actuator)?;
-    crate::linalg::schur_stable(&nl.a).ok_or_else(unconverged)
+    // The plant's states come first in the loop's state; the frames the filter never reads
+    // fall in the other block.
+    let plant_states: Vec<usize> = (0..plant.a.nrows()).collect();
+    crate::linalg::schur_stable_split(&nl.a, &plant_states).ok_or_else(unconverged)
 }
 
 /// Closed-loop eigenvalues and the stationary RMS of u and Δu of `mpc` (designed on
@@ -833,27 +836,32 @@ pub fn velocity_wander(
         );
     }
     let nl = lagged_noise_loop(mpc, controller, plant, lag_factor(input_lag, dt)?)?;
-    let mut bw = nl.b.clone();
+    // The plant's states come first in the loop's state.
+    let layout = crate::control::AxisLayout::from_model(plant)?;
+    let velocities: Vec<usize> = layout.axes().iter().map(|ax| ax.v).collect();
+    // Most of the controller's frame stack never reaches the velocity (the filter reads the
+    // newest frame): the velocity's statistics are those of the block that does, a loop of
+    // about half the states. The other block must still be stable, as the whole loop must.
+    let (kept, rest) = crate::linalg::split_reaching(&nl.a, &velocities);
+    let stable_rest = crate::linalg::schur_stable(&crate::linalg::principal_block(&nl.a, &rest));
+    if !stable_rest.ok_or_else(unconverged)? {
+        return Ok(f64::INFINITY);
+    }
+    let a = crate::linalg::principal_block(&nl.a, &kept);
+    let mut bw = nl.b.select_rows(&kept);
     for (j, s) in w.iter().enumerate() {
         bw.column_mut(j).scale_mut(*s);
     }
-    let p = match crate::linalg::stationary_covariance(&nl.a, &bw) {
+    let p = match crate::linalg::stationary_covariance(&a, &bw) {
         Some(Stationary::Stable(p)) => p,
         Some(Stationary::Unstable) => return Ok(f64::INFINITY),
         None => return Err(unconverged()),
     };
-    // The plant's states come first in the loop's state.
-    let layout = crate::control::AxisLayout::from_model(plant)?;
     let mut worst = 0.0_f64;
-    for ax in layout.axes() {
-        let mut c = DMatrix::<f64>::zeros(1, nl.a.ncols());
-        c[(0, ax.v)] = 1.0;
-        worst = worst.max(crate::linalg::window_mean_std(
-            &nl.a,
-            &p,
-            &c,
-            window as usize,
-        ));
+    for v in velocities {
+        let mut c = DMatrix::<f64>::zeros(1, a.ncols());
+        c[(0, kept.partition_point(|&i| i < v))] = 1.0;
+        worst = worst.max(crate::linalg::window_mean_std(&a, &p, &c, window as usize));
     }
     Ok(worst)
 }

@@ -262,6 +262,47 @@ pub fn window_mean_std(a: &DMatrix<f64>, p: &DMatrix<f64>, c: &DMatrix<f64>, win
     (sum.max(0.0) / (n * n)).sqrt()
 }
 
+/// A's states split in two at `outputs`: those that reach any of the outputs through A's
+/// nonzero entries (the outputs included), and the rest, each in ascending order. No state
+/// of the first set is moved by the rest, so A is block triangular there: the outputs'
+/// statistics are those of the first block alone, and A's eigenvalues are the two blocks'.
+pub fn split_reaching(a: &DMatrix<f64>, outputs: &[usize]) -> (Vec<usize>, Vec<usize>) {
+    let n = a.nrows();
+    let mut reached = vec![false; n];
+    let mut stack: Vec<usize> = Vec::new();
+    for &i in outputs {
+        if i < n && !reached[i] {
+            reached[i] = true;
+            stack.push(i);
+        }
+    }
+    while let Some(i) = stack.pop() {
+        for j in 0..n {
+            if !reached[j] && a[(i, j)] != 0.0 {
+                reached[j] = true;
+                stack.push(j);
+            }
+        }
+    }
+    (0..n).partition(|&i| reached[i])
+}
+
+/// The square block of `a` on the states `idx`.
+pub fn principal_block(a: &DMatrix<f64>, idx: &[usize]) -> DMatrix<f64> {
+    a.select_rows(idx).select_columns(idx)
+}
+
+/// [`schur_stable`] of A split at [`split_reaching`] `seeds`: A is stable when both
+/// diagonal blocks are, and two smaller blocks are squared instead of the whole (a quarter
+/// of the products for two halves).
+pub fn schur_stable_split(a: &DMatrix<f64>, seeds: &[usize]) -> Option<bool> {
+    let (kept, rest) = split_reaching(a, seeds);
+    if rest.is_empty() {
+        return schur_stable(a);
+    }
+    Some(schur_stable(&principal_block(a, &kept))? && schur_stable(&principal_block(a, &rest))?)
+}
+
 /// Pole of a first-order lag of time constant `tau` [s] sampled at `dt` [s] under a
 /// zero-order hold, λ = exp(−dt/τ): x⁺ = λx + (1 − λ)u. 0 (no lag) for `tau` ≤ 0.
 pub fn lag_factor(tau: f64, dt: f64) -> f64 {
@@ -282,6 +323,66 @@ mod tests {
     fn rotation(r: f64, angle: f64) -> DMatrix<f64> {
         let (s, c) = angle.sin_cos();
         DMatrix::from_row_slice(2, 2, &[r * c, -r * s, r * s, r * c])
+    }
+
+    #[test]
+    fn a_state_is_kept_exactly_when_it_reaches_an_output_and_stability_is_both_blocks() {
+        // x0 ← x1 ← x2 (x2 reaches x0 through x1); x3 moves x0 but nothing moves x3 from the
+        // kept side; x4 is moved by x0 and reaches nothing.
+        let mut a = DMatrix::<f64>::zeros(5, 5);
+        for (i, j, v) in [
+            (0, 0, 0.5),
+            (0, 1, 0.2),
+            (1, 2, 0.3),
+            (0, 3, 0.1),
+            (3, 3, 0.4),
+            (4, 0, 1.0),
+            (4, 4, 0.9),
+        ] {
+            a[(i, j)] = v;
+        }
+        assert_eq!(split_reaching(&a, &[0]), (vec![0, 1, 2, 3], vec![4]));
+        assert_eq!(split_reaching(&a, &[4]), ((0..5).collect(), vec![]));
+        assert_eq!(split_reaching(&a, &[3]), (vec![3], vec![0, 1, 2, 4]));
+        assert_eq!(split_reaching(&a, &[]), (vec![], (0..5).collect()));
+        assert_eq!(schur_stable_split(&a, &[0]), Some(true));
+        // An unstable state in either block makes the whole unstable.
+        for (i, v) in [(4, 1.2), (3, -1.1)] {
+            let mut b = a.clone();
+            b[(i, i)] = v;
+            assert_eq!(schur_stable_split(&b, &[0]), Some(false), "{i}");
+            assert_eq!(schur_stable(&b), Some(false), "{i}");
+        }
+        // Random sparse matrices: the split's verdict is the eigenvalues'.
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        for trial in 0..200 {
+            let n = rng.random_range(2..12);
+            let scale = rng.random_range(0.3..1.6);
+            let m = DMatrix::from_fn(n, n, |_, _| {
+                if rng.random_bool(0.3) {
+                    rng.random_range(-1.0..1.0) * scale
+                } else {
+                    0.0
+                }
+            });
+            let rho = spectral_radius(&m).unwrap();
+            if (rho - 1.0).abs() < 1e-6 {
+                continue;
+            }
+            let seeds = [rng.random_range(0..n)];
+            let (kept, rest) = split_reaching(&m, &seeds);
+            // Nothing outside the kept set moves a kept state.
+            for &i in &kept {
+                for &j in &rest {
+                    assert_eq!(m[(i, j)], 0.0, "trial {trial}");
+                }
+            }
+            assert_eq!(
+                schur_stable_split(&m, &seeds),
+                Some(rho < 1.0),
+                "trial {trial}"
+            );
+        }
     }
 
     #[test]
