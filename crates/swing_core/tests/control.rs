@@ -1011,6 +1011,15 @@ fn step_check_rejects_mismatched_plants_and_bad_settings() {
 /// A DMDc model of a smooth nonlinear flight (lagged vehicle, PID training steps), rank
 /// truncated like the pipeline's choice (q = 12, p = 9): it has the spurious lightly damped
 /// fast modes (a ring of eigenvalues near |λ| ≈ 0.8, one near −0.8) that real fits have.
+/// White swing-sensor noise of standard deviation `swing` [rad], on no other channel.
+fn swing_noise(swing: f64) -> swing_core::design::check::MeasurementNoise {
+    swing_core::design::check::MeasurementNoise {
+        velocity: 0.0,
+        swing,
+        swing_rate: 0.0,
+    }
+}
+
 fn truncated_flight_model() -> LinearModel {
     use swing_core::sysid::dmdc::{fit, DmdcSettings};
     use swing_core::sysid::Trajectory;
@@ -1094,11 +1103,7 @@ fn velocity_wander_matches_a_seeded_noise_simulation() {
     use swing_core::design::check::{velocity_wander, MeasurementNoise};
     let model = truncated_flight_model();
     let plant_model = delay_model(&params(0.2, 1.0), TS, 2, 3).unwrap();
-    let noise = MeasurementNoise {
-        velocity: 0.0,
-        swing: 0.01,
-        swing_rate: 0.0,
-    };
+    let noise = swing_noise(0.01);
     let span = 2.0;
     let window = (span / TS).round() as usize;
     for input_lag in [0.0, 0.1] {
@@ -1169,15 +1174,11 @@ fn velocity_wander_matches_a_seeded_noise_simulation() {
 /// gives the same 2 s-mean standard deviation to rounding, with and without a lag.
 #[test]
 fn the_wander_of_the_block_that_reaches_the_velocity_is_the_whole_loop_s() {
-    use swing_core::design::check::{lagged_noise_loop, velocity_wander, MeasurementNoise};
+    use swing_core::design::check::{lagged_noise_loop, velocity_wander};
     use swing_core::linalg::{stationary_covariance, window_mean_std, Stationary};
     let model = truncated_flight_model();
     let plant = delay_model(&params(0.2, 1.0), TS, 2, 3).unwrap();
-    let noise = MeasurementNoise {
-        velocity: 0.0,
-        swing: 0.01,
-        swing_rate: 0.0,
-    };
+    let noise = swing_noise(0.01);
     let span = 2.0;
     let mpc = MpcController::new(&model, unbounded()).unwrap();
     for input_lag in [0.0, 0.1] {
@@ -1211,14 +1212,10 @@ fn the_wander_of_the_block_that_reaches_the_velocity_is_the_whole_loop_s() {
 /// one is refused by name.
 #[test]
 fn the_swing_measurement_noise_is_carried_by_the_model_and_lowers_the_wander() {
-    use swing_core::design::check::{velocity_wander, MeasurementNoise};
+    use swing_core::design::check::velocity_wander;
     let model = truncated_flight_model();
     let plant = delay_model(&params(0.2, 1.0), TS, 2, 3).unwrap();
-    let noise = MeasurementNoise {
-        velocity: 0.0,
-        swing: 0.01,
-        swing_rate: 0.0,
-    };
+    let noise = swing_noise(0.01);
     let wander = |m: &LinearModel, r: Option<f64>| {
         let settings = MpcSettings {
             kf_swing_measurement_noise: r,
