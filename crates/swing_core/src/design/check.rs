@@ -836,6 +836,10 @@ pub fn velocity_wander(
         );
     }
     let nl = lagged_noise_loop(mpc, controller, plant, lag_factor(input_lag, dt)?)?;
+    // A non-finite entry between the blocks below would escape both: refused as before.
+    if !nl.a.iter().chain(nl.b.iter()).all(|v| v.is_finite()) {
+        return Err(unconverged());
+    }
     // The plant's states come first in the loop's state.
     let layout = crate::control::AxisLayout::from_model(plant)?;
     let velocities: Vec<usize> = layout.axes().iter().map(|ax| ax.v).collect();

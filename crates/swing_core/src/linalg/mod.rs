@@ -296,6 +296,10 @@ pub fn principal_block(a: &DMatrix<f64>, idx: &[usize]) -> DMatrix<f64> {
 /// diagonal blocks are, and two smaller blocks are squared instead of the whole (a quarter
 /// of the products for two halves).
 pub fn schur_stable_split(a: &DMatrix<f64>, seeds: &[usize]) -> Option<bool> {
+    // A non-finite entry between the blocks would escape both: refused as the whole would be.
+    if !a.iter().all(|v| v.is_finite()) {
+        return None;
+    }
     let (kept, rest) = split_reaching(a, seeds);
     if rest.is_empty() {
         return schur_stable(a);
@@ -346,6 +350,11 @@ mod tests {
         assert_eq!(split_reaching(&a, &[3]), (vec![3], vec![0, 1, 2, 4]));
         assert_eq!(split_reaching(&a, &[]), (vec![], (0..5).collect()));
         assert_eq!(schur_stable_split(&a, &[0]), Some(true));
+        // A NaN below the kept block is refused, as the whole matrix's verdict refuses it.
+        let mut nan = a.clone();
+        nan[(4, 1)] = f64::NAN;
+        assert_eq!(schur_stable_split(&nan, &[0]), None);
+        assert_eq!(schur_stable(&nan), None);
         // An unstable state in either block makes the whole unstable.
         for (i, v) in [(4, 1.2), (3, -1.1)] {
             let mut b = a.clone();
