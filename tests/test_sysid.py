@@ -1167,10 +1167,12 @@ def test_the_disturbance_rate_designed_on_the_twin_s_gust_takes_up_a_gust_in_fli
     """Sample 341 of the vehicle-varied robustness campaign, seed 11 (0.46 kg on 0.39 m
     under a 0.78 kg vehicle, a 0.9 m/s headwind gust 12 s after the step): PX4's own swing
     excess is small, and the gust's swing, taken up late by the default disturbance rate,
-    puts the MPC past the campaign's 0.4 of it. The pick passed on the twin, so its rate is
-    designed on the twin's gust: 2.5 times the default leaves less of the gust's swing
-    there, passes every flight again, and the model carries it; in flight the same model
-    with the default rate fails the bound and with the designed one does not."""
+    puts the MPC past the campaign's 0.4 of it. The pick passed on the twin, so its
+    disturbance estimate is designed on the twin's gust: 2.5 times the default rate leaves
+    less of the gust's swing there, and with a gust state beside it less again (0.43×
+    PX4's swing in flight as set, 0.26× so designed); it passes every flight again, and
+    the model carries it; in flight the same model with the default estimate fails the
+    bound and with the designed one does not."""
     from swingrt.experiments.identification import case_twin
 
     train, train_sc, ev = _campaign_sample(341, "robustness-vehicle", seed=11)
@@ -1178,14 +1180,46 @@ def test_the_disturbance_rate_designed_on_the_twin_s_gust_takes_up_a_gust_in_fli
     result = sysid.search(train, vehicle_mass=train_sc.to_dict()["vehicle"]["mass"])
     model = sysid.select_for_control(train, result, twin=twin).model
     design = model.diagnostics["control_check"]["disturbance_design"]
-    flown, raised = design["tried"]
+    tried = {(t["factor"], t["gust_noise"]): t for t in design["tried"]}
+    flown, raised = tried[(1.0, None)], tried[(2.5, None)]
     assert raised["passed"] and raised["gust_swing_iae"] < flown["gust_swing_iae"], design
+    # With a gust state too, less again: that design is taken.
+    both = tried[(2.5, 0.3)]
+    assert both["passed"] and both["gust_swing_iae"] < raised["gust_swing_iae"], design
     assert design["factor"] == 2.5 and model.diagnostics["disturbance_noise"] == pytest.approx(0.05)
+    assert design["gust_noise"] == 0.3 and model.diagnostics["gust_noise"] == pytest.approx(0.3)
     pid = _fly(ev, controller="pid")["swing_excess_iae_deg_s"]
-    default = _fly(ev, model.with_diagnostics({"disturbance_noise": None}))
+    default = _fly(ev, model.with_diagnostics({"disturbance_noise": None, "gust_noise": None}))
     designed = _fly(ev, model)
     assert default["swing_excess_iae_deg_s"] > 0.4 * pid, (default, pid)
     assert designed["swing_excess_iae_deg_s"] < 0.35 * pid, (designed, pid)
+
+
+def test_a_gust_state_keeps_a_late_gust_s_swing_under_the_bound():
+    """Sample 395 of the robustness campaign, seed 1 (a 0.40 kg double pendulum on 0.38 m,
+    a 1.9 m/s gust at 19.6 s): with the disturbance rate alone designed, the constant
+    disturbance estimate answers the gust as lasting and carries its force past its end,
+    the MPC brakes the vehicle to 1.8 m/s after it, and the flight ends at 0.405× PX4's
+    swing excess (the campaign's bound 0.4). With a gust state, a force the MPC predicts to
+    fade, the twin's gust leaves less swing, the design is taken, and the flight is well
+    under the bound."""
+    from swingrt.experiments.identification import case_twin
+
+    train, train_sc, ev = _campaign_sample(395, "robustness", seed=1)
+    twin = case_twin(_campaign_experiment(395, "robustness", seed=1), train_sc)
+    result = sysid.search(train, vehicle_mass=train_sc.to_dict()["vehicle"]["mass"])
+    model = sysid.select_for_control(train, result, twin=twin).model
+    design = model.diagnostics["control_check"]["disturbance_design"]
+    assert design["gust_noise"] == 0.3 and model.diagnostics["gust_noise"] == 0.3, design
+    swing = {(t["factor"], t["gust_noise"]): t["gust_swing_iae"] for t in design["tried"]}
+    rate_alone = min(swing[(f, None)] for f in (1.0, 2.5))
+    assert swing[(design["factor"], 0.3)] < 0.9 * rate_alone, design
+    pid = _fly(ev, controller="pid")["swing_excess_iae_deg_s"]
+    alone = _fly(ev, model.with_diagnostics({"gust_noise": None, "disturbance_noise": 0.05}))
+    designed = _fly(ev, model)
+    ratio = designed["swing_excess_iae_deg_s"] / pid
+    assert ratio < 0.38, (designed, pid)
+    assert alone["swing_excess_iae_deg_s"] / pid > ratio + 0.02, (alone, designed, pid)
 
 
 def test_a_raised_disturbance_rate_that_needs_the_twin_s_attitude_loop_is_refused():
@@ -1200,12 +1234,13 @@ def test_a_raised_disturbance_rate_that_needs_the_twin_s_attitude_loop_is_refuse
     train, train_sc, ev = _campaign_sample(61, "robustness-vehicle", seed=13)
     twin = case_twin(_campaign_experiment(61, "robustness-vehicle", seed=13), train_sc)
     result = sysid.search(train, vehicle_mass=train_sc.to_dict()["vehicle"]["mass"])
+    # The rate alone designed (no gust state), as when this rule was set.
     nominal = sysid.select_for_control(
-        train, result, twin=twin, slow_motor_lag=0.0, slow_inertia=1.0
+        train, result, twin=twin, slow_motor_lag=0.0, slow_inertia=1.0, gust_noise=0.0
     ).model
     assert nominal.diagnostics["control_check"]["disturbance_design"]["factor"] == 2.5
     assert nominal.diagnostics["control_check"]["slow_vehicle"] is None
-    model = sysid.select_for_control(train, result, twin=twin).model
+    model = sysid.select_for_control(train, result, twin=twin, gust_noise=0.0).model
     cc = model.diagnostics["control_check"]
     assert "1.5× its inertia" in cc["slow_vehicle"], cc["slow_vehicle"]
     assert (model.delays, model.rank) == (nominal.delays, nominal.rank)
@@ -1217,6 +1252,15 @@ def test_a_raised_disturbance_rate_that_needs_the_twin_s_attitude_loop_is_refuse
     assert math.isfinite(picked["v_settle_s"]), picked
     assert picked["swing_excess_iae_deg_s"] < 0.1 * pid, (picked, pid)
     assert math.isinf(_fly(ev, nominal)["v_settle_s"])
+    # As shipped, the gust state (taken on the nominal twin) is refused on the slow vehicle
+    # too, with the rate as set or raised: the pick flies its estimator as designed.
+    shipped = sysid.select_for_control(train, result, twin=twin).model
+    design = shipped.diagnostics["control_check"]["disturbance_design"]
+    assert (design["factor"], design["gust_noise"]) == (1.0, None), design
+    assert [t["passed"] for t in design["tried"]] == [True, False, False, False], design
+    flown = _fly(ev, shipped)
+    assert math.isfinite(flown["v_settle_s"]), flown
+    assert flown["swing_excess_iae_deg_s"] < 0.1 * pid, (flown, pid)
 
 
 @pytest.mark.parametrize("mass", [0.0, -1.0, math.nan, math.inf, 0.05])

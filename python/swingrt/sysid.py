@@ -672,6 +672,7 @@ def select_for_control(
     twin_bounds: Mapping[str, float] | None = None,
     noise_factors: Sequence[float] | None = None,
     disturbance_factors: Sequence[float] | None = None,
+    gust_noise: float | None = None,
     payload_tolerance: float | None = None,
     slow_motor_lag: float | None = None,
     slow_inertia: float | None = None,
@@ -731,13 +732,16 @@ def select_for_control(
     both passes. A pick that passed on the twin then has its disturbance estimate's rate
     designed there: it flies the twin's gust flight (the step held, a 1 m/s headwind gust
     for 2 s, no sensor noise) as designed and with its disturbances' Kalman process noise
-    raised by each of ``disturbance_factors`` above 1 (default 1, 2.5); a raised design
-    that passes every flight again and is back within the settle band within the twin's
-    ``settle`` after the gust is taken when the gust leaves less swing, and the model
-    carries it (``diagnostics['disturbance_noise']``; ``control_check
-    ['disturbance_design']``). A candidate that passes every other flight also flies the
-    twin's step with every link of the payload ``1 ∓ payload_tolerance`` times as long
-    (default 0.1: the white-box's lengths are estimates) and must settle there within the
+    raised by each of ``disturbance_factors`` above 1 (default 1, 2.5), each also with a
+    gust state of stationary std ``gust_noise`` m/s² (default 0.3; 0 tries none: a force
+    the MPC predicts to fade, ``MpcSettings::gust_noise``); a design that passes every
+    flight again and is back within the settle band within the twin's ``settle`` after the
+    gust is taken when the gust leaves less swing, and the model carries it
+    (``diagnostics['disturbance_noise']``, ``diagnostics['gust_noise']``;
+    ``control_check['disturbance_design']``). A candidate that passes every other flight
+    also flies the twin's step with every link of the payload ``1 ∓ payload_tolerance``
+    times as long (default 0.1: the white-box's lengths are estimates) and must settle
+    there within the
     twin's step bounds (``checked[*].payload_miss``, the worst ratio of a figure to its
     bound; 0 flies the nominal twin alone), and on a slow vehicle: the twin with motors of
     time constant ``slow_motor_lag`` [s] (default 0.04, where slower than its own) and
@@ -781,6 +785,7 @@ def select_for_control(
         "twin_bounds": None if twin_bounds is None else dict(twin_bounds),
         "noise_factors": None if noise_factors is None else list(noise_factors),
         "disturbance_factors": None if disturbance_factors is None else list(disturbance_factors),
+        "gust_noise": gust_noise,
         "payload_tolerance": payload_tolerance,
         "slow_motor_lag": slow_motor_lag,
         "slow_inertia": slow_inertia,

@@ -321,8 +321,15 @@ pub struct SelectionSettings {
     /// design that passes every bound again (step, linear plants, hold) and settles after
     /// the gust within `twin_bounds.settle` replaces it when the gust leaves less swing
     /// (`control_check.disturbance_design`). The pick then carries the raised noise
-    /// (`Diagnostics::disturbance_noise`). `[1]`: the rate as set, no gust flown.
+    /// (`Diagnostics::disturbance_noise`). `[1]` and no `gust_noise`: the rate as set, no
+    /// gust flown.
     pub disturbance_factors: Vec<f64>,
+    /// The gust state as a design variable, beside `disturbance_factors` [m/s²]: each of
+    /// those designs is also tried with a gust force of this stationary std estimated
+    /// (`MpcSettings::gust_noise`, the `condense` module docs), and flies by the same rule
+    /// (every bound again, back on the setpoint after the gust, less of the gust's swing).
+    /// The pick then carries it (`Diagnostics::gust_noise`). 0: no gust state tried.
+    pub gust_noise: f64,
     /// How far the twin's payload may be from the one it carries, as a fraction of its
     /// lengths: a candidate that passes every other flight also flies the twin's step with
     /// every link of the payload `1 − payload_tolerance` and `1 + payload_tolerance` times as
@@ -533,6 +540,9 @@ impl Default for SelectionSettings {
             // The default and 2.5 times it. On `robustness-vehicle` seed 8, 0.05 for every
             // sample righted its four gust failures and failed five others: a rate per pick.
             disturbance_factors: vec![1.0, 2.5],
+            // A 1 m/s gust on a multirotor's drag of about 0.3 /s. Twice that refused the
+            // nominal flights of `robustness` seed 1's sample 395 (the late gust).
+            gust_noise: 0.3,
             payload_tolerance: 0.1,
             slow_motor_lag: 0.04,
             slow_inertia: 1.5,
@@ -586,6 +596,7 @@ impl SelectionSettings {
         positive("twin_bounds.late_error", self.twin_bounds.late_error)?;
         design_factors("noise_factors", &self.noise_factors, "the noise")?;
         design_factors("disturbance_factors", &self.disturbance_factors, "the rate")?;
+        non_negative("gust_noise", self.gust_noise)?;
         positive("wander_sigmas", self.wander_sigmas)?;
         if !(0.0..1.0).contains(&self.payload_tolerance) {
             return Err(ConfigError::new(
@@ -1400,11 +1411,16 @@ pub fn select_for_control(
     };
     // The disturbance estimate's rate designed on the twin's gust, for a pick that passed.
     let disturbance_design = match twin {
-        Some(tw) if mpc_passed && settings.disturbance_factors.iter().any(|&f| f > 1.0) => {
+        Some(tw)
+            if mpc_passed
+                && (settings.disturbance_factors.iter().any(|&f| f > 1.0)
+                    || settings.gust_noise > 0.0) =>
+        {
             let (designed, report) = design_disturbance(
                 model,
                 mpc_settings,
                 &settings.disturbance_factors,
+                settings.gust_noise,
                 tw,
                 settings,
                 |m: &LinearModel, mpc: MpcController| {
@@ -1521,6 +1537,7 @@ fn design_factors(field: &str, factors: &[f64], what: &str) -> Result<(), Config
 struct DisturbanceTrial {
     factor: f64,
     noise: f64,
+    gust_noise: Option<f64>,
     passed: bool,
     gust: Option<TwinGust>,
 }
@@ -1552,16 +1569,18 @@ fn choose_disturbance(trials: &[DisturbanceTrial], settings: &SelectionSettings)
     chosen
 }
 
-/// The disturbance estimate's rate of the passed pick `model` designed on the twin `twin`
-/// (`SelectionSettings::disturbance_factors`): the pick as flown and each raised design
-/// that `passes` (every flight of the selection again) fly the twin's gust, and the
+/// The disturbance estimate of the passed pick `model` designed on the twin `twin`
+/// (`SelectionSettings::disturbance_factors`, `gust_noise`): the pick as flown and each
+/// other design (a raised rate, a gust state of stationary std `gust_noise` when positive,
+/// both) that `passes` (every flight of the selection again) fly the twin's gust, and the
 /// admissible one whose gust leaves the least swing is taken (the pick as flown on a tie
-/// or when none is admissible). Returns the model, carrying a raised rate when one was
-/// taken, and the report for `control_check.disturbance_design`.
+/// or when none is admissible). Returns the model, carrying the design taken, and the
+/// report for `control_check.disturbance_design`.
 fn design_disturbance(
     model: LinearModel,
     mpc_settings: &MpcSettings,
     factors: &[f64],
+    gust_noise: f64,
     twin: &TwinPlant,
     settings: &SelectionSettings,
     passes: impl Fn(&LinearModel, MpcController) -> Result<bool, ControlError> + Sync,
@@ -1570,23 +1589,37 @@ fn design_disturbance(
         crate::control::mpc::settings_for(&model, mpc_settings.clone())?.kf_disturbance_noise;
     let mut raised: Vec<f64> = factors.iter().copied().filter(|&f| f > 1.0).collect();
     raised.dedup();
-    let mut designs = vec![(1.0, model.clone())];
-    for &f in &raised {
-        let mut m = model.clone();
-        m.diagnostics.disturbance_noise = Some(base * f);
-        designs.push((f, m));
+    let gusts: &[Option<f64>] = if gust_noise > 0.0 {
+        &[None, Some(gust_noise)]
+    } else {
+        &[None]
+    };
+    let mut designs = Vec::new();
+    for &g in gusts {
+        for &f in std::iter::once(&1.0).chain(&raised) {
+            let mut m = model.clone();
+            if f > 1.0 {
+                m.diagnostics.disturbance_noise = Some(base * f);
+            }
+            if g.is_some() {
+                m.diagnostics.gust_noise = g;
+            }
+            designs.push((f, g, m));
+        }
     }
     // Each design's flights depend on nothing flown for another: one per core.
     let trials = crate::parallel::map(
         designs.iter().collect::<Vec<_>>(),
-        |(factor, m)| -> Result<DisturbanceTrial, ControlError> {
+        |(factor, gust_noise, m)| -> Result<DisturbanceTrial, ControlError> {
             let mpc = MpcController::new(m, mpc_settings.clone())?;
             // The pick as flown passed already.
-            let passed = *factor == 1.0 || passes(m, mpc.fresh_copy()?)?;
+            let as_flown = *factor == 1.0 && gust_noise.is_none();
+            let passed = as_flown || passes(m, mpc.fresh_copy()?)?;
             let gust = if passed { Some(twin.gust(mpc)?) } else { None };
             Ok(DisturbanceTrial {
                 factor: *factor,
                 noise: base * factor,
+                gust_noise: *gust_noise,
                 passed,
                 gust,
             })
@@ -1599,15 +1632,17 @@ fn design_disturbance(
         "gust": TWIN_GUST,
         "factor": trials[chosen].factor,
         "kf_disturbance_noise": trials[chosen].noise,
+        "gust_noise": trials[chosen].gust_noise,
         "tried": trials.iter().map(|t| json!({
             "factor": t.factor,
             "kf_disturbance_noise": t.noise,
+            "gust_noise": t.gust_noise,
             "passed": t.passed,
             "gust_swing_iae": t.gust.map(|g| g.swing_iae).filter(|x| x.is_finite()),
             "gust_resettle": t.gust.map(|g| g.resettle).filter(|x| x.is_finite()),
         })).collect::<Vec<_>>(),
     });
-    let (_, model) = designs.swap_remove(chosen);
+    let (_, _, model) = designs.swap_remove(chosen);
     Ok((model, report))
 }
 
@@ -2323,6 +2358,7 @@ mod tests {
         DisturbanceTrial {
             factor,
             noise: 0.02 * factor,
+            gust_noise: None,
             passed,
             gust: gust.map(|(swing_iae, resettle)| TwinGust {
                 swing_iae,

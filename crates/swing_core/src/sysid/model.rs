@@ -167,6 +167,11 @@ pub struct Diagnostics {
     /// disturbance design, on the twin's gust flight.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub disturbance_noise: Option<f64>,
+    /// Stationary std of the gust force an MPC on this model estimates at least
+    /// (`MpcSettings::gust_noise`) [m/s²]: set by the control-relevant selection's
+    /// disturbance design, on the twin's gust flight.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gust_noise: Option<f64>,
     /// Weight of the acceleration command's change (`MpcSettings::w_acc_rate`) an MPC on
     /// this model uses at least: set by the control-relevant selection's second-link design
     /// (`SelectionSettings::spillover`), where the pick's command would drive a lower mode
@@ -366,6 +371,7 @@ impl LinearModel {
                 self.diagnostics.swing_measurement_noise,
             ),
             ("disturbance_noise", self.diagnostics.disturbance_noise),
+            ("gust_noise", self.diagnostics.gust_noise),
             ("acc_rate_weight", self.diagnostics.acc_rate_weight),
         ] {
             if let Some(r) = r {

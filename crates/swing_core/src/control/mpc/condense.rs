@@ -19,9 +19,17 @@
 //!   Offset-free tracking needs the disturbances to explain every steady model mismatch
 //!   (Pannocchia & Rawlings 2003: as many disturbances as measured outputs). The lower
 //!   delay frames are exact shifts, so `state` meets that for any constant disturbance;
-//!   `velocity` and `input` only for disturbances of their own shape.
+//!   `velocity` and `input` only for disturbances of their own shape;
+//! * g the gusts, when asked for (`gust_time`): one per axis on the velocity row of the newest
+//!   frame, entering as T_s·g (g in m/s²) and decaying as g⁺ = e^{−T_s/τ} g, a first-order
+//!   Gauss–Markov force of correlation time τ. A constant disturbance is the right model of
+//!   steady wind and a bias, and the wrong one of a gust: the MPC predicts the gust's force
+//!   held over the whole horizon, answers it in full, and the estimate carries it past the
+//!   gust's end, where the vehicle brakes against a force that is gone. The gust state lets
+//!   the estimator put a sudden force where it is predicted to fade; the steady target
+//!   (below) counts only the constant disturbances, since a gust has no steady state.
 //!
-//! So ξ⁺ = 𝒜 ξ + ℬ u + c̃ with c̃ = [c − Bū; 0; 0]. Outputs per axis y = [v, ṡ, s] = 𝒞 ξ.
+//! So ξ⁺ = 𝒜 ξ + ℬ u + c̃ with c̃ = [c − Bū; 0; 0; 0] (ξ = [z; s⁻; d; g]). Outputs per axis y = [v, ṡ, s] = 𝒞 ξ.
 //!
 //! **Cost** (eq. 5.28–5.31, the MPC Toolbox form the thesis uses), decision U = [u₀ … u_{Nc−1}],
 //! u_j = u_{Nc−1} for j ≥ Nc (eq. 5.22):
@@ -75,15 +83,18 @@ pub struct Augmented {
     /// the previous ξ into entry `destination`; applied last pair first and before z shifts,
     /// every copy reads a value of the previous tick.
     pub lag_copies: Vec<(usize, usize)>,
-    /// Number of disturbance states: ξ[nm..nm + nd].
+    /// Number of disturbance states, the constant ones and then the gusts: ξ[nm..nm + nd].
     pub nd: usize,
+    /// Number of gust states among them, the last (0 or one per axis).
+    pub gusts: usize,
     /// Number of inputs / axes.
     pub m: usize,
 }
 
 impl Augmented {
     /// Build from the identified model. `iv`, `is` are the indices of each axis' velocity
-    /// and swing in the newest frame of the `n` physical states.
+    /// and swing in the newest frame of the `n` physical states; `gust_time`, when given,
+    /// adds a gust state per axis of that correlation time [s] (module docs).
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         a: &DMatrix<f64>,
@@ -96,6 +107,7 @@ impl Augmented {
         is: &[usize],
         dt: f64,
         disturbance: DisturbanceModel,
+        gust_time: Option<f64>,
     ) -> Self {
         let nz = a.nrows();
         let m = b.ncols();
@@ -124,17 +136,26 @@ impl Augmented {
             }
         }
         let nm = next;
-        let nd = match disturbance {
+        let constant = match disturbance {
             DisturbanceModel::Velocity | DisturbanceModel::Input => m,
             DisturbanceModel::State => n,
         };
+        let gusts = if gust_time.is_some() { m } else { 0 };
+        let nd = constant + gusts;
         let nx = nm + nd;
         let mut aa = DMatrix::<f64>::zeros(nx, nx);
         aa.view_mut((0, 0), (nz, nz)).copy_from(a);
         for &(dst, src) in &lag_copies {
             aa[(dst, src)] = 1.0;
         }
-        for j in 0..nd {
+        if let Some(tau) = gust_time {
+            for (i, &v) in iv.iter().enumerate() {
+                let k = nm + constant + i;
+                aa[(v, k)] = dt;
+                aa[(k, k)] = (-dt / tau).exp();
+            }
+        }
+        for j in 0..constant {
             match disturbance {
                 DisturbanceModel::Velocity => aa[(iv[j], nm + j)] = dt,
                 DisturbanceModel::Input => {
@@ -164,6 +185,7 @@ impl Augmented {
             nm,
             lag_copies,
             nd,
+            gusts,
             m,
         }
     }
@@ -273,11 +295,14 @@ fn targets(aug: &Augmented, iv: &[usize], is: &[usize]) -> Result<Targets, Contr
         s_d: DMatrix::zeros(m, nd),
         s_0: DVector::zeros(m),
     };
+    // A gust fades: the steady state holds only the constant disturbances.
+    let constant = nd - aug.gusts;
+    t.u_d.columns_mut(constant, aug.gusts).fill(0.0);
     for i in 0..m {
         for j in 0..m {
             t.s_r[(i, j)] = sol[(is[i], j)];
         }
-        for j in 0..nd {
+        for j in 0..constant {
             t.s_d[(i, j)] = sol[(is[i], m + j)];
         }
         t.s_0[i] = sol[(is[i], m + nd)];

@@ -79,6 +79,12 @@ pub struct MpcSettings {
     /// fraction of `kf_disturbance_noise` (1 = same; < 1 adapts to a steady payload force
     /// such as wind more slowly than to a force on the vehicle).
     pub kf_swing_disturbance_scale: f64,
+    /// Stationary std of the gust force the filter estimates on each axis' velocity
+    /// [m/s²] (0: no gust state; `condense` module docs); a model that carries a larger
+    /// one (`Diagnostics::gust_noise`, from the selection's disturbance design) raises it.
+    pub gust_noise: f64,
+    /// Correlation time of the gust force [s]: how fast the MPC predicts a gust to fade.
+    pub gust_time: f64,
     /// Kalman measurement noise std [state units: m/s, rad]; a model that carries a
     /// larger one (`Diagnostics::measurement_noise`, from the selection) raises it.
     pub kf_measurement_noise: f64,
@@ -121,6 +127,10 @@ impl Default for MpcSettings {
             // runs away; a tenth of the velocity disturbance's rate avoids that and still
             // lets a wind step settle.
             kf_swing_disturbance_scale: 0.1,
+            gust_noise: 0.0,
+            // The gusts of the robustness studies last 2 s, and a gust much longer than the
+            // swing's period is wind the constant disturbance takes up.
+            gust_time: 2.0,
             kf_measurement_noise: 0.01,
             kf_swing_measurement_noise: None,
             solver: QpSolverKind::ActiveSet,
@@ -134,6 +144,12 @@ impl MpcSettings {
     pub fn swing_measurement_noise(&self) -> f64 {
         self.kf_swing_measurement_noise
             .unwrap_or(self.kf_measurement_noise)
+    }
+
+    /// The gust states' correlation time [s] when the filter estimates gusts
+    /// (`gust_noise` > 0).
+    pub fn gust_time(&self) -> Option<f64> {
+        (self.gust_noise > 0.0).then_some(self.gust_time)
     }
 
     /// Check horizons, weights and limits.
@@ -176,6 +192,8 @@ impl MpcSettings {
             "kf_swing_disturbance_scale",
             self.kf_swing_disturbance_scale,
         )?;
+        non_negative("gust_noise", self.gust_noise)?;
+        positive("gust_time", self.gust_time)?;
         positive("kf_measurement_noise", self.kf_measurement_noise)?;
         if let Some(r) = self.kf_swing_measurement_noise {
             positive("kf_swing_measurement_noise", r)?;
@@ -312,6 +330,10 @@ pub(crate) fn settings_for(
         positive("disturbance_noise", q)?;
         settings.kf_disturbance_noise = settings.kf_disturbance_noise.max(q);
     }
+    if let Some(g) = model.diagnostics.gust_noise {
+        positive("gust_noise", g)?;
+        settings.gust_noise = settings.gust_noise.max(g);
+    }
     if let Some(w) = model.diagnostics.acc_rate_weight {
         positive("acc_rate_weight", w)?;
         settings.w_acc_rate = settings.w_acc_rate.max(w);
@@ -382,25 +404,33 @@ pub(crate) fn qp_backend(
     })
 }
 
-/// Diagonal of the Kalman process noise of ξ = [z; s⁻; d] (module docs of
-/// [`estimator`]): only the newest frame is a new measurement each tick; the older frames
-/// of the stack are the same measurements shifted down, so they carry neither process
-/// noise (the shift is exact) nor fresh measurement noise. Filtering them as independent
-/// measurements would let the noise of every frame through the gain K_ξ, which weighs
-/// differences of frames (rates) heavily.
+/// Diagonal of the Kalman process noise of ξ = [z; s⁻; d; g] (module docs of
+/// [`estimator`]) for a model of tick `dt`: only the newest frame is a new measurement each
+/// tick; the older frames of the stack are the same measurements shifted down, so they
+/// carry neither process noise (the shift is exact) nor fresh measurement noise. Filtering
+/// them as independent measurements would let the noise of every frame through the gain
+/// K_ξ, which weighs differences of frames (rates) heavily. The `gusts` gust states, last,
+/// get the per-tick noise that keeps their stationary std at `gust_noise`.
 pub(crate) fn process_noise(
     settings: &MpcSettings,
+    dt: f64,
     n: usize,
     nm: usize,
     nd: usize,
+    gusts: usize,
     sources: &[Measured],
 ) -> Vec<f64> {
+    let constant = nd - gusts;
+    let decay = (-2.0 * dt / settings.gust_time).exp();
+    let gust = settings.gust_noise.powi(2) * (1.0 - decay);
     (0..nm + nd)
         .map(|i| {
             if i < n {
                 settings.kf_process_noise.powi(2)
             } else if i < nm {
                 0.0
+            } else if i >= nm + constant {
+                gust
             } else {
                 let swing = settings.disturbance == DisturbanceModel::State
                     && !matches!(sources[i - nm], Measured::V(_));
@@ -493,6 +523,7 @@ impl MpcController {
             &is,
             dt,
             settings.disturbance,
+            settings.gust_time(),
         );
         let nm = aug.nm;
         let nx = aug.nx();
@@ -517,7 +548,7 @@ impl MpcController {
         // measurements would let the noise of every frame through the gain K_ξ, which
         // weighs differences of frames (rates) heavily.
         let w = DMatrix::from_diagonal(&DVector::from_vec(process_noise(
-            &settings, n, nm, aug.nd, &sources,
+            &settings, dt, n, nm, aug.nd, aug.gusts, &sources,
         )));
         let v = DMatrix::from_diagonal(&DVector::from_vec(measurement_variances(
             &settings, &sources,
@@ -565,9 +596,11 @@ impl MpcController {
         out.settings.kf_swing_measurement_noise = Some(r);
         let w = DMatrix::from_diagonal(&DVector::from_vec(process_noise(
             &out.settings,
+            out.dt,
             out.n,
             out.aug.nm,
             out.aug.nd,
+            out.aug.gusts,
             &out.sources,
         )));
         let v = DMatrix::from_diagonal(&DVector::from_vec(measurement_variances(
@@ -643,7 +676,7 @@ impl MpcController {
     }
 
     /// Estimated disturbances (after the last correction), in the layout of
-    /// [`MpcSettings::disturbance`].
+    /// [`MpcSettings::disturbance`], then the gusts (one per axis) when estimated.
     pub fn disturbance(&self) -> &[f64] {
         let nm = self.aug.nm;
         &self.kf.estimate().as_slice()[nm..nm + self.aug.nd]
