@@ -10,14 +10,14 @@ use rand_chacha::ChaCha8Rng;
 use serde::de::DeserializeOwned;
 
 use swing_core::config::{from_json_str, from_toml_value, parse_toml};
-use swing_core::design::adaptive::AdaptiveSettings;
 use swing_core::control::mpc::condense::DisturbanceModel;
 use swing_core::control::px4::Px4Params;
-use swing_core::design::selection::{CheckBounds, SelectionSettings};
 use swing_core::control::{
     AxisState, LqrController, LqrSettings, MpcController, MpcSettings, QpSolverKind,
     SwingController,
 };
+use swing_core::design::adaptive::AdaptiveSettings;
+use swing_core::design::selection::{CheckBounds, SelectionSettings};
 use swing_core::design::{mpc_step_check, StepCheckSettings};
 use swing_core::plant::{PayloadParams, PendulumModel, VehicleParams, WindParams};
 use swing_core::sim::{HilPlant, HilSettings, NoiseParams, Scenario, SetpointEntry, Simulator};
@@ -838,6 +838,12 @@ fn mpc_inner(u: &mut Unstructured<'_>) -> AResult<()> {
         ])?,
         kf_disturbance_noise: positive(u, 0.02)?,
         kf_swing_disturbance_scale: positive(u, 0.1)?,
+        gust_noise: if u.arbitrary()? {
+            0.0
+        } else {
+            positive(u, 0.3)?
+        },
+        gust_time: positive(u, 2.0)?,
         kf_measurement_noise: positive(u, 0.01)?,
         kf_swing_measurement_noise: opt(u, |u| positive(u, 0.01))?,
         solver: *u.choose(&[QpSolverKind::ActiveSet, QpSolverKind::Clarabel])?,
