@@ -415,12 +415,11 @@ pub(crate) fn process_noise(
     settings: &MpcSettings,
     dt: f64,
     n: usize,
-    nm: usize,
-    nd: usize,
-    gusts: usize,
+    aug: &Augmented,
     sources: &[Measured],
 ) -> Vec<f64> {
-    let constant = nd - gusts;
+    let (nm, nd) = (aug.nm, aug.nd);
+    let constant = nd - aug.gusts;
     let decay = (-2.0 * dt / settings.gust_time).exp();
     let gust = settings.gust_noise.powi(2) * (1.0 - decay);
     (0..nm + nd)
@@ -542,13 +541,8 @@ impl MpcController {
             settings.horizon,
             settings.control_horizon,
         )?;
-        // Only the newest frame is a new measurement each tick; the older frames of the
-        // stack are the same measurements shifted down, so they carry neither process noise
-        // (the shift is exact) nor fresh measurement noise. Filtering them as independent
-        // measurements would let the noise of every frame through the gain K_ξ, which
-        // weighs differences of frames (rates) heavily.
         let w = DMatrix::from_diagonal(&DVector::from_vec(process_noise(
-            &settings, dt, n, nm, aug.nd, aug.gusts, &sources,
+            &settings, dt, n, &aug, &sources,
         )));
         let v = DMatrix::from_diagonal(&DVector::from_vec(measurement_variances(
             &settings, &sources,
@@ -598,9 +592,7 @@ impl MpcController {
             &out.settings,
             out.dt,
             out.n,
-            out.aug.nm,
-            out.aug.nd,
-            out.aug.gusts,
+            &out.aug,
             &out.sources,
         )));
         let v = DMatrix::from_diagonal(&DVector::from_vec(measurement_variances(

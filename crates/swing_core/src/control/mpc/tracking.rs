@@ -409,9 +409,7 @@ impl TrackingMpc {
         // Kalman filter: measured [p; newest frame].
         let nm0 = aug.nm;
         let mut w = vec![tracking.kf_position_process_noise.powi(2); m];
-        w.extend(process_noise(
-            &settings, dt, n, nm0, aug.nd, aug.gusts, &sources,
-        ));
+        w.extend(process_noise(&settings, dt, n, &aug, &sources));
         let wm = DMatrix::from_diagonal(&DVector::from_vec(w));
         let mut v = vec![tracking.kf_position_noise.powi(2); m];
         v.extend(measurement_variances(&settings, &sources));
