@@ -115,7 +115,9 @@ def test_the_offboard_node_estimates_the_swing_from_highres_imu_as_a_ulog_is_rea
     att = (t_us, {f"q[{i}]": np.full(len(t_us), 1.0 if i == 0 else 0.0) for i in range(4)})
     imu = (t_us, {f"accelerometer_m_s2[{i}]": acc[:, i] for i in range(3)})
     pos = {f: np.zeros(len(t_us)) for f in ("vx", "vy", "vz")}
-    _, (batch, _) = _imu_swing(imu, att, t_us, pos, t_us, None)
+    _, choice, (batch, _) = _imu_swing(imu, att, t_us, pos, t_us, None)
+    # A clean pull: no vibration in the log, so the default low-pass stays.
+    assert choice is not None and choice.cutoff == settings["cutoff"]
     online = np.asarray(online)
     # At a 100 Hz grid point that is also an IMU sample, a ULog's estimate is the one fed
     # there, and the node holds it from the next message on; after the 1 s tare.
@@ -124,6 +126,43 @@ def test_the_offboard_node_estimates_the_swing_from_highres_imu_as_a_ulog_is_rea
     np.testing.assert_allclose(online[on_grid + 1], batch[on_grid], rtol=0, atol=1e-12)
     late = tt > 6.0
     assert np.max(np.abs(batch[late])) == pytest.approx(theta0, rel=0.03)
+
+
+def test_a_logs_vibration_lowers_the_estimators_low_pass_to_where_it_passes_0_3_degrees():
+    """PX4's integrated IMU folds rotor vibration into the estimator's band (230 Hz read at
+    250 Hz is 20 Hz). A 20 Hz line of amplitude A on body x, fed at 100 Hz through the
+    estimator's Butterworth at f_c, leaves (A/√2)|H(20)|/k̂ of angle, |H|² = 1/(1 + (tan(π
+    20/f_s)/tan(π f_c/f_s))⁴): the chosen cutoff is the one that puts that at 0.3°, in closed
+    form; a small line keeps the default 10 Hz, a huge one stops at the 3 Hz floor; the
+    payload's own 0.5 Hz swing counts for (almost) nothing."""
+    from swingrt.io.vibration import MIN_CUTOFF_HZ, NOISE_BOUND_DEG, choose_cutoff, swing_noise
+
+    rate, k, fv = 100.0, 1.96133, 20.0
+    t = np.arange(0.0, 120.0, 1.0 / rate)
+    swing = 1.0 * np.sin(2 * math.pi * 0.5 * t)  # a 27° pull: motion, not noise
+
+    def line(a):
+        return np.column_stack([swing + a * np.sin(2 * math.pi * fv * t), 0.2 * swing])
+
+    bound = math.radians(NOISE_BOUND_DEG) * k
+    for a in (0.3, 0.5, 0.8):
+        h2 = (bound / (a / math.sqrt(2))) ** 2
+        expected = (rate / math.pi) * math.atan(
+            math.tan(math.pi * fv / rate) * (1.0 / h2 - 1.0) ** -0.25
+        )
+        c = choose_cutoff(line(a), rate, k, 10.0)
+        assert c.given == 10.0 and c.noise_given_deg > NOISE_BOUND_DEG
+        assert c.cutoff == pytest.approx(expected, abs=0.15), (a, c, expected)
+        assert c.noise_deg <= NOISE_BOUND_DEG
+        assert c.noise_deg == pytest.approx(
+            math.degrees(swing_noise(line(a), rate, k, c.cutoff)), rel=1e-9
+        )
+    # At 10 Hz a 20 Hz line passes at |H| = 0.2: A = 0.05 m/s² is 0.2°, kept.
+    small = choose_cutoff(line(0.05), rate, k, 10.0)
+    assert small.cutoff == 10.0 and small.noise_deg < NOISE_BOUND_DEG
+    assert choose_cutoff(line(30.0), rate, k, 10.0).cutoff == MIN_CUTOFF_HZ
+    # The swing alone is motion: only the Hann window's side lobes reach past 3 Hz.
+    assert swing_noise(line(0.0), rate, k, 10.0) < 0.1 * math.radians(NOISE_BOUND_DEG)
 
 
 def test_a_ulog_with_the_cable_sensor_on_adc_channels_loads_into_the_simulators_world_angles(

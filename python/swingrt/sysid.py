@@ -502,14 +502,18 @@ def _estimated_by(data: Any, settings: Mapping[str, Any]) -> bool:
 def _with_source(model: LinearModel, data: Any) -> LinearModel:
     """``model`` with the flight's swing source in its diagnostics and, for ``imu``, the
     estimator's settings (a flight on the model must estimate the swing the same way) and
-    the scale measured from the flight (``swing_scale``, :func:`imu_swing_scale`); the
-    estimator it carries is the one it flies (:func:`flown_estimator`: the measured scale
-    only where it is the smaller)."""
+    the scale measured from the flight (``swing_scale``, :func:`imu_swing_scale`) and, from
+    a ULog, the low-pass its vibration chose (``swing_vibration``,
+    :mod:`swingrt.io.vibration`); the estimator it carries is the one it flies
+    (:func:`flown_estimator`: the measured scale only where it is the smaller)."""
     source = swing_source(data)
     extra: dict[str, Any] = {"swing_source": source}
     if source == "imu":
         extra["swing_estimator"] = flown_estimator(data)
         extra["swing_scale"] = imu_swing_scale(data)["diagnostics"]
+        vibration = (getattr(data, "meta", None) or {}).get("swing_vibration")
+        if vibration is not None:
+            extra["swing_vibration"] = dict(vibration)
     if source == "body":
         extra["body_sensor"] = body_sensor(data)
     return model.with_diagnostics(extra)

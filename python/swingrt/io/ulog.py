@@ -21,7 +21,9 @@ log, ``swing_est_n swing_est_e`` are the swing estimated from the vehicle's own 
 (``_core.estimate_swing``, the simulator's estimator: the accelerometer's body-horizontal
 specific force as the cable's pull, composed with the attitude), fed block means of
 ``sensor_combined`` at the estimator's rate from the start of the flight segment (its tare),
-with ``estimator`` settings (``sensors.estimator`` of a scenario; default: the core's). A log
+with ``estimator`` settings (``sensors.estimator`` of a scenario; default: the core's, its
+low-pass lowered where the log's own vibration would pass more than 0.3° of angle noise
+through it, ``meta["swing_vibration"]``: :mod:`swingrt.io.vibration`). A log
 without a swing sensor is then identified on the IMU (:func:`swingrt.sysid.swing_source`);
 ``meta["swing_estimator"]`` holds the settings, which the model carries and the flight must
 use.
@@ -64,6 +66,7 @@ import numpy as np
 
 from swingrt.errors import ConfigError, DataError
 from swingrt.io.flight import Trace
+from swingrt.io.vibration import choose_cutoff
 
 __all__ = ["DEFAULT_ULOG_SWING", "euler_to_quat", "load_ulog", "quat_to_euler"]
 
@@ -384,9 +387,11 @@ def _trace_from_ulog(
         for c, y in cols.items():
             out[c] = _interp_topic(t_base, t_src, y)
     if imu is not None and att is not None:
-        settings, est = _imu_swing(imu, att, t_pos, fpos, t_base, estimator, t_data_start)
+        settings, choice, est = _imu_swing(imu, att, t_pos, fpos, t_base, estimator, t_data_start)
         out["swing_est_n"], out["swing_est_e"] = est
         out.meta["swing_estimator"] = settings
+        if choice is not None:
+            out.meta["swing_vibration"] = choice.as_dict()
     if "_q0" in out:
         q = np.stack([out.pop(f"_q{i}") for i in range(4)])
         q /= np.linalg.norm(q, axis=0)
@@ -441,16 +446,19 @@ def _adc_counts(st, body: Mapping | None, sources: list) -> str | None:
 
 
 def _imu_swing(imu, att, t_pos, fpos, t_base, estimator, t_data_start=None):
-    """The swing estimated from the log's IMU on ``t_base`` [µs] (N, E) and the estimator's
-    settings: block means of ``sensor_combined`` over each 1/rate s (a decimation, so the
-    rotors' vibration does not alias), the attitude and velocity interpolated, fed to the
-    core's estimator, then interpolated back. The estimator starts its ``tare`` seconds
+    """The estimator's settings, the cutoff chosen from the log's vibration (None where the
+    settings fix it; :mod:`swingrt.io.vibration`) and the swing estimated from the log's IMU
+    on ``t_base`` [µs] (N, E): block means of ``sensor_combined`` over each 1/rate s (a
+    decimation: what PX4's integration already folded stays folded, the rest does not fold
+    again), the attitude and velocity interpolated, fed to the core's estimator, then
+    interpolated back. The estimator starts its ``tare`` seconds
     before ``t_base[0]`` when the log reaches back so far (``t_data_start``): the tare is
     then the hover before the flight segment, not its first manoeuvre."""
     from swingrt import _core
 
     probe = _core.ImuSwingEstimator(dict(estimator) if estimator else None)
     settings = dict(probe.settings)
+    choice = None
     period = 1e6 / float(settings["rate"])
     start = t_base[0]
     if t_data_start is not None:
@@ -458,7 +466,7 @@ def _imu_swing(imu, att, t_pos, fpos, t_base, estimator, t_data_start=None):
     grid = np.arange(start + period, t_base[-1] + 0.5 * period, period)
     if len(grid) < 2:
         nan = np.full(len(t_base), np.nan)
-        return settings, (nan, nan)
+        return settings, choice, (nan, nan)
     t_imu, f_imu = imu
     acc = np.stack([f_imu[f"accelerometer_m_s2[{i}]"].astype(float) for i in range(3)], axis=1)
     # Block means of the samples in (t - period, t]; a block with none takes the nearest.
@@ -468,6 +476,11 @@ def _imu_swing(imu, att, t_pos, fpos, t_base, estimator, t_data_start=None):
     count = (hi - lo)[:, None]
     nearest = acc[np.clip(hi - 1, 0, len(acc) - 1)]
     accel = np.where(count > 0, (csum[hi] - csum[lo]) / np.maximum(count, 1), nearest)
+    if "cutoff" not in (estimator or {}):
+        # The log's own vibration sets the low-pass where the settings leave it open.
+        rate, scale = float(settings["rate"]), float(settings["scale"])
+        choice = choose_cutoff(accel[:, :2], rate, scale, float(settings["cutoff"]))
+        settings["cutoff"] = choice.cutoff
     t_att, f_att = att
     q = np.stack([f_att[f"q[{i}]"].astype(float) for i in range(4)])
     flip = np.cumsum(np.r_[0, (np.einsum("ij,ij->j", q[:, 1:], q[:, :-1]) < 0)]) % 2 == 1
@@ -480,4 +493,8 @@ def _imu_swing(imu, att, t_pos, fpos, t_base, estimator, t_data_start=None):
     est = _core.estimate_swing(
         np.ascontiguousarray(accel), np.ascontiguousarray(qg), np.ascontiguousarray(vel), settings
     )
-    return settings, (np.interp(t_base, grid, est[:, 0]), np.interp(t_base, grid, est[:, 1]))
+    return (
+        settings,
+        choice,
+        (np.interp(t_base, grid, est[:, 0]), np.interp(t_base, grid, est[:, 1])),
+    )
