@@ -122,6 +122,7 @@ def test_experiment_list_and_a_small_experiment(tmp_path, cli):
         "effort",
         "swing_excess_iae_deg_s",
         "residual_swing_deg",
+        "residual_oscillation_deg",
         "swing_free_s",
         "acc_sp_tv",
     ]

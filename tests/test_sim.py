@@ -206,6 +206,8 @@ def test_residual_swing_and_swing_free_time_of_a_decaying_oscillation():
     swing = np.where(t >= 2.0, np.radians(a * np.exp(-s / tau) * np.cos(2 * np.pi * s / period)), 0)
     m = swingrt.step_metrics(_step_trace(t, swing), t0=2.0)
     assert m["residual_swing_deg"] == pytest.approx(a * math.exp(-4.0 / tau), rel=1e-6)
+    # The velocity is steady from the step on: no lean, the oscillation is the swing.
+    assert m["residual_oscillation_deg"] == pytest.approx(m["residual_swing_deg"], rel=1e-9)
     crossing = tau * math.log(a / 0.25)
     assert crossing - period / 2 - 0.002 <= m["swing_free_s"] <= crossing + 0.002
     # The 1° band of swing_settle_s is reached earlier: the envelope crosses it at τ ln(A).
@@ -216,6 +218,32 @@ def test_residual_swing_and_swing_free_time_of_a_decaying_oscillation():
     floor = swing_iae_floor(_step_trace(t, swing), t0=2.0)
     assert m["swing_excess_iae_deg_s"] == pytest.approx(m["swing_iae_deg_s"] - floor)
     assert m["swing_excess_iae_deg_s"] > 0.5 * m["swing_iae_deg_s"]
+
+
+def test_residual_oscillation_is_the_swing_about_the_lean_the_acceleration_asks():
+    """A step approached exponentially, v = 2(1 − e^{−s/τ}) (s = t − 2), leans the payload
+    by −atan(a/g), a = (2/τ)e^{−s/τ}: on that lean alone the residual swing from 4 s is the
+    lean at s = 4 (0.79° at τ = 2 s) and the residual oscillation is nil; a swing
+    A e^{−s/5} cos(πs) about the lean (a peak at s = 4) is the residual oscillation,
+    A e^{−4/5}, whichever way the step goes."""
+    tau, amp = 2.0, 0.5
+    t = np.arange(0.0, 40.0001, 0.001)
+    s = np.clip(t - 2.0, 0.0, None)
+    on = t >= 2.0
+    acc = np.where(on, (2.0 / tau) * np.exp(-s / tau), 0.0)
+    lean = -np.arctan(acc / 9.80665)
+    wobble = np.where(on, np.radians(amp * np.exp(-s / 5.0) * np.cos(np.pi * s)), 0.0)
+    for sign in (1.0, -1.0):
+        for swing, expected in ((lean, 0.0), (lean + wobble, amp * math.exp(-0.8))):
+            tr = _step_trace(t, sign * swing)
+            tr["vn"] = sign * np.where(on, 2.0 * (1.0 - np.exp(-s / tau)), 0.0)
+            tr["vel_sp_n"] = sign * np.where(on, 2.0, 0.0)
+            m = swingrt.step_metrics(tr, t0=2.0)
+            assert m["residual_oscillation_deg"] == pytest.approx(expected, abs=0.005), sign
+            if expected == 0.0:
+                # Yet the swing is still the lean's 0.79° away from its final value.
+                lean_at_4 = math.atan((2.0 / tau) * math.exp(-4.0 / tau) / 9.80665)
+                assert m["residual_swing_deg"] == pytest.approx(math.degrees(lean_at_4), abs=0.01)
 
 
 def test_a_one_signed_swing_has_no_excess_above_the_floor():

@@ -15,6 +15,13 @@ the step direction), over the window after the step:
   of the swing IAE a controller decides (see below);
 - ``residual_swing_deg``: largest |swing − final| from 4 s after ``t0`` to the end [deg]: the
   swing left once the velocity transient is over;
+- ``residual_oscillation_deg``: the same, less the lean the vehicle's acceleration asks of
+  the payload: largest |swing − final − lean| from 4 s after ``t0`` [deg], lean =
+  −atan(a/g) with a the vehicle's acceleration along the step (its velocity's change over
+  :data:`LEAN_SPAN_S`). A controller still finishing its velocity step at 4 s leans the
+  payload by a/g (0.1 m/s² is 0.6°) without any swing about that lean; this is the swing
+  about it. It never hides a free swing: the cable's pull on the vehicle is
+  (m_p/m_Q)·g·θ, so a swing the controller leaves alone counts (1 + m_p/m_Q) times;
 - ``swing_free_s``: time after ``t0`` from which |swing − final| < 0.25° for good [s] — the
   start of swing-free cruise. It is ``swing_settle_s`` with a band four times narrower: 1°
   is inside the swing that any velocity change needs, so ``swing_settle_s`` ranks every good
@@ -55,6 +62,7 @@ METRICS = (
     "effort",
     "swing_excess_iae_deg_s",
     "residual_swing_deg",
+    "residual_oscillation_deg",
     "swing_free_s",
     "acc_sp_tv",
 )
@@ -63,6 +71,10 @@ METRICS = (
 SWING_FREE_BAND_DEG = 0.25
 #: Start of the ``residual_swing_deg`` window after the step [s].
 RESIDUAL_AFTER_S = 4.0
+#: Span of the velocity change ``residual_oscillation_deg`` reads the vehicle's acceleration
+#: from, centred [s]: short against the swing's period (about 2 s on 1 m), long against the
+#: velocity estimate's noise.
+LEAN_SPAN_S = 0.2
 
 
 def _col(trace, name: str) -> np.ndarray:
@@ -140,6 +152,12 @@ def step_metrics(
     a2 = an[win] ** 2 + ae[win] ** 2
     dev = np.degrees(sw - final_swing)
     late = tw >= t0 + RESIDUAL_AFTER_S
+    # The swing about the lean: along the step (the signed swing, as the floor reads it).
+    half = 0.5 * LEAN_SPAN_S
+    acc = (np.interp(tw + half, tw, vw) - np.interp(tw - half, tw, vw)) / LEAN_SPAN_S
+    sa = along[win]
+    lean = -np.arctan(acc / _core.GRAVITY)
+    about = np.degrees(sa - float(np.mean(sa[tail])) - lean)
     iae, floor = _core.swing_iae(tw, sw, along[win])
     return {
         "peak_swing_deg": float(np.degrees(np.max(np.abs(sw)))),
@@ -151,6 +169,7 @@ def step_metrics(
         "effort": float(np.sum(a2) * dt),
         "swing_excess_iae_deg_s": iae - floor,
         "residual_swing_deg": float(np.max(np.abs(dev[late]))) if late.any() else math.nan,
+        "residual_oscillation_deg": float(np.max(np.abs(about[late]))) if late.any() else math.nan,
         "swing_free_s": _settle(tw, dev, SWING_FREE_BAND_DEG, t0),
         "acc_sp_tv": acc_sp_tv(an[win], ae[win]),
     }
