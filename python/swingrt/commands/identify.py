@@ -184,6 +184,13 @@ def run(args) -> int:
         shown = "" if lag is None else f", attitude lag {lag:.3f} s"
         line += f" (m_p {wb['payload_mass']:.3f} kg, l {wb['length']:.3f} m{shown})"
     print(line)
+    vib = model.diagnostics.get("swing_vibration")
+    if vib and vib["cutoff"] < vib["given"]:
+        print(
+            f"IMU swing low-pass: {vib['cutoff']:.2f} Hz, not {vib['given']:g}: the log's "
+            f"vibration passes {vib['noise_given_deg']:.2f}° of angle noise at "
+            f"{vib['given']:g} Hz, {vib['noise_deg']:.2f}° at {vib['cutoff']:.2f}"
+        )
     if args.plots:
         out = Path(args.plots)
         if result is not None:
