@@ -88,12 +88,23 @@ def _noise(freq: np.ndarray, density: np.ndarray, rate: float, cutoff: float) ->
     return math.sqrt(float(np.sum(density[band] * gain)) * float(freq[1] - freq[0]))
 
 
+def _spectra(accel_xy: np.ndarray, rate: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Both axes' Welch densities, over the samples where both are finite."""
+    x = np.asarray(accel_xy, float)
+    x = x[np.isfinite(x).all(axis=1)]
+    return [_power(x[:, i], rate) for i in range(2)]
+
+
+def _worst(spectra, rate: float, scale: float, cutoff: float) -> float:
+    """The worse axis's angle noise [rad] through the low-pass at ``cutoff``."""
+    return max(_noise(f, p, rate, cutoff) for f, p in spectra) / scale
+
+
 def swing_noise(accel_xy: np.ndarray, rate: float, scale: float, cutoff: float) -> float:
     """Angle noise [rad] the estimator passes at ``cutoff`` [Hz] of the body-horizontal
     specific force ``accel_xy`` (N×2 [m/s²], as fed at ``rate`` [Hz]) above the motion band,
     at the pull scale ``scale`` [m/s²]; the worse axis (module docs)."""
-    spectra = [_power(np.asarray(accel_xy[:, i], float), rate) for i in range(2)]
-    return max(_noise(f, p, rate, cutoff) for f, p in spectra) / scale
+    return _worst(_spectra(accel_xy, rate), rate, scale, cutoff)
 
 
 def choose_cutoff(accel_xy: np.ndarray, rate: float, scale: float, cutoff: float) -> CutoffChoice:
@@ -103,13 +114,11 @@ def choose_cutoff(accel_xy: np.ndarray, rate: float, scale: float, cutoff: float
     there, found by bisection, or :data:`MIN_CUTOFF_HZ` (module docs). A cutoff of 0 (no
     low-pass) is lowered like any other; a flight shorter than a Welch segment keeps
     ``cutoff``."""
-    x = np.asarray(accel_xy, float)
-    finite = np.isfinite(x).all(axis=1)
-    spectra = [_power(x[finite, i], rate) for i in range(2)]
+    spectra = _spectra(accel_xy, rate)
     bound = math.radians(NOISE_BOUND_DEG)
 
     def noise(fc: float) -> float:
-        return max(_noise(f, p, rate, fc) for f, p in spectra) / scale
+        return _worst(spectra, rate, scale, fc)
 
     top = cutoff if 0.0 < cutoff < 0.5 * rate else 0.5 * rate
     given = noise(cutoff)
