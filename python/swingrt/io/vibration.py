@@ -28,6 +28,7 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
+from scipy import signal
 
 #: The angle noise above the payload's motion the estimator's defaults were chosen at [deg].
 NOISE_BOUND_DEG = 0.3
@@ -61,18 +62,15 @@ class CutoffChoice:
 
 
 def _power(x: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
-    """One-sided Welch power spectral density of ``x`` sampled at ``rate`` [Hz]: the
+    """One-sided Welch power spectral density of ``x`` sampled at ``rate`` [Hz] (Hann
+    segments of :data:`SEGMENT_S`, half overlap, each segment's mean removed): the
     frequencies [Hz] and the density [unit²/Hz]; empty when ``x`` is shorter than a
     segment."""
     seg = int(round(SEGMENT_S * rate))
     if seg < 8 or len(x) < seg:
         return np.zeros(0), np.zeros(0)
-    w = np.hanning(seg)
-    starts = range(0, len(x) - seg + 1, seg // 2)
-    segs = np.array([x[i : i + seg] - x[i : i + seg].mean() for i in starts])
-    spec = np.abs(np.fft.rfft(segs * w, axis=1)) ** 2
-    density = spec.mean(axis=0) * 2.0 / (rate * float(np.sum(w**2)))
-    return np.fft.rfftfreq(seg, 1.0 / rate), density
+    freq, density = signal.welch(x, fs=rate, window="hann", nperseg=seg, detrend="constant")
+    return freq, density
 
 
 def _noise(freq: np.ndarray, density: np.ndarray, rate: float, cutoff: float) -> float:
