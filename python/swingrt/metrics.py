@@ -18,10 +18,14 @@ the step direction), over the window after the step:
 - ``residual_oscillation_deg``: the same, less the lean the vehicle's acceleration asks of
   the payload: largest |swing − final − lean| from 4 s after ``t0`` [deg], lean =
   −atan(a/g) with a the vehicle's acceleration along the step (its velocity's change over
-  :data:`LEAN_SPAN_S`). A controller still finishing its velocity step at 4 s leans the
-  payload by a/g (0.1 m/s² is 0.6°) without any swing about that lean; this is the swing
-  about it. It never hides a free swing: the cable's pull on the vehicle is
-  (m_p/m_Q)·g·θ, so a swing the controller leaves alone counts (1 + m_p/m_Q) times;
+  :data:`LEAN_SPAN_S`, centred). A controller still finishing its velocity step at 4 s leans
+  the payload by a/g (0.1 m/s² is 0.6°) without any swing about that lean; this is the swing
+  about it. The lean is quasi-static: a payload follows the vehicle's acceleration only
+  below its own swing rate, so the span averages out the vehicle's faster wobbles (1–2 Hz,
+  which a payload on 1 m answers with 0.15× the lean, the other way). It never hides a free
+  swing on a cable longer than 0.25 m (a swing rate under 1 Hz, where the span passes the
+  pull with a positive gain): the cable's pull on the vehicle is (m_p/m_Q)·g·θ, so a swing
+  the controller leaves alone counts more than once;
 - ``swing_free_s``: time after ``t0`` from which |swing − final| < 0.25° for good [s] — the
   start of swing-free cruise. It is ``swing_settle_s`` with a band four times narrower: 1°
   is inside the swing that any velocity change needs, so ``swing_settle_s`` ranks every good
@@ -72,9 +76,10 @@ SWING_FREE_BAND_DEG = 0.25
 #: Start of the ``residual_swing_deg`` window after the step [s].
 RESIDUAL_AFTER_S = 4.0
 #: Span of the velocity change ``residual_oscillation_deg`` reads the vehicle's acceleration
-#: from, centred [s]: short against the swing's period (about 2 s on 1 m), long against the
-#: velocity estimate's noise.
-LEAN_SPAN_S = 0.2
+#: from, centred [s]: a low-pass whose first null is at 1 Hz (a 0.25 m cable's swing rate),
+#: so the vehicle's own 1–2 Hz wobbles, which a payload does not follow quasi-statically,
+#: barely lean it, while a step's approach (a time constant of 1–2 s) is read within 1–4 %.
+LEAN_SPAN_S = 1.0
 
 
 def _col(trace, name: str) -> np.ndarray:
