@@ -248,7 +248,9 @@ def test_residual_oscillation_is_the_swing_about_the_lean_the_acceleration_asks(
             assert m["residual_oscillation_deg"] == pytest.approx(expected, abs=0.001), sign
             if swing is lean:
                 # Yet the swing is still the lean's 0.79° away from its final value.
-                assert m["residual_swing_deg"] == pytest.approx(math.degrees(math.atan(a4 / g)), abs=0.01)
+                assert m["residual_swing_deg"] == pytest.approx(
+                    math.degrees(math.atan(a4 / g)), abs=0.01
+                )
 
 
 def test_residual_oscillation_does_not_read_a_wobble_the_payload_cannot_follow():
