@@ -677,6 +677,7 @@ def select_for_control(
     noise_factors: Sequence[float] | None = None,
     disturbance_factors: Sequence[float] | None = None,
     gust_noise: float | None = None,
+    trust_factors: Sequence[float] | None = None,
     payload_tolerance: float | None = None,
     slow_motor_lag: float | None = None,
     slow_inertia: float | None = None,
@@ -742,7 +743,13 @@ def select_for_control(
     flight again and is back within the settle band within the twin's ``settle`` after the
     gust is taken when the gust leaves less swing, and the model carries it
     (``diagnostics['disturbance_noise']``, ``diagnostics['gust_noise']``;
-    ``control_check['disturbance_design']``). A candidate that passes every other flight
+    ``control_check['disturbance_design']``). On a swing estimated from the IMU, the pick
+    that passed then has its trust in that estimate designed there: its swing measurement
+    noise as designed and raised by each of ``trust_factors`` above 1 (default 1, 10, 30,
+    100) is judged on every flight again and flown on the twin's gust (both flights with the
+    twin's IMU noise), and of those that pass and resettle after the gust the one whose
+    step excess plus gust swing IAE is least is taken (``control_check['trust_design']``;
+    the model carries its noise). A candidate that passes every other flight
     also flies the twin's step with every link of the payload ``1 ∓ payload_tolerance``
     times as long (default 0.1: the white-box's lengths are estimates) and must settle
     there within the
@@ -790,6 +797,7 @@ def select_for_control(
         "noise_factors": None if noise_factors is None else list(noise_factors),
         "disturbance_factors": None if disturbance_factors is None else list(disturbance_factors),
         "gust_noise": gust_noise,
+        "trust_factors": None if trust_factors is None else list(trust_factors),
         "payload_tolerance": payload_tolerance,
         "slow_motor_lag": slow_motor_lag,
         "slow_inertia": slow_inertia,

@@ -330,6 +330,19 @@ pub struct SelectionSettings {
     /// (every bound again, back on the setpoint after the gust, less of the gust's swing).
     /// The pick then carries it (`Diagnostics::gust_noise`). 0: no gust state tried.
     pub gust_noise: f64,
+    /// The swing estimate's trust as a design variable, for a swing estimated from the IMU:
+    /// the factors by which the passed pick's MPC may raise its filter's swing measurement
+    /// noise (`MpcSettings::swing_measurement_noise`) beyond the noise design's. The IMU's
+    /// estimate errs by more than white noise (the airframe's drag, the attitude loop's
+    /// leak, a bias), which no Kalman measurement noise describes, and an MPC that trusts it
+    /// feeds its noise into the payload at the swing's own rate; one that trusts it less
+    /// damps from the model's prediction and corrects slowly. The pick and each raised
+    /// design that passes every bound again fly the twin's gust, and the one settled after
+    /// it within `twin_bounds.settle` whose twin swing (the step's excess plus the gust's
+    /// swing IAE, both flights carrying the IMU's noise) is least flies
+    /// (`control_check.trust_design`); the pick then carries its noise
+    /// (`Diagnostics::swing_measurement_noise`). `[1]`: as designed, nothing flown.
+    pub trust_factors: Vec<f64>,
     /// How far the twin's payload may be from the one it carries, as a fraction of its
     /// lengths: a candidate that passes every other flight also flies the twin's step with
     /// every link of the payload `1 − payload_tolerance` and `1 + payload_tolerance` times as
@@ -543,6 +556,10 @@ impl Default for SelectionSettings {
             // A 1 m/s gust on a multirotor's drag of about 0.3 /s. Twice that refused the
             // nominal flights of `robustness` seed 1's sample 395 (the late gust).
             gust_noise: 0.3,
+            // The design's noise and 10, 30 and 100 times it: over the default step's seeds
+            // 0-8 on the IMU, 0.01 rad (the default) left 0.6-1.9 deg·s of swing excess, 1 rad
+            // 0.13-0.63 and every swing within 0.63° of its final value from 4 s.
+            trust_factors: vec![1.0, 10.0, 30.0, 100.0],
             payload_tolerance: 0.1,
             slow_motor_lag: 0.04,
             slow_inertia: 1.5,
@@ -596,6 +613,11 @@ impl SelectionSettings {
         positive("twin_bounds.late_error", self.twin_bounds.late_error)?;
         design_factors("noise_factors", &self.noise_factors, "the noise")?;
         design_factors("disturbance_factors", &self.disturbance_factors, "the rate")?;
+        design_factors(
+            "trust_factors",
+            &self.trust_factors,
+            "the trust as designed",
+        )?;
         non_negative("gust_noise", self.gust_noise)?;
         positive("wander_sigmas", self.wander_sigmas)?;
         if !(0.0..1.0).contains(&self.payload_tolerance) {
@@ -1432,6 +1454,27 @@ pub fn select_for_control(
         }
         _ => None,
     };
+    // The IMU swing estimate's trust designed on the twin's step and gust, for a pick that
+    // passed.
+    let trust_design = match twin {
+        Some(tw)
+            if mpc_passed
+                && tw.estimates_swing()
+                && settings.trust_factors.iter().any(|&f| f > 1.0) =>
+        {
+            let (designed, report) = design_trust(
+                model,
+                mpc_settings,
+                &settings.trust_factors,
+                tw,
+                settings,
+                |m: &LinearModel, mpc: MpcController| evaluate(m, mpc, false),
+            )?;
+            model = designed;
+            Some(report)
+        }
+        _ => None,
+    };
     // The second link the swing's spectrum allows, for a pick that passed: flown there, and
     // designed smoother where it does not settle.
     let peak = plant
@@ -1507,6 +1550,7 @@ pub fn select_for_control(
             })),
             "wander": wander,
             "disturbance_design": disturbance_design,
+            "trust_design": trust_design,
             "spillover": spillover,
             "payload_tolerance": settings.payload_tolerance,
             "slow_vehicle": slow_twin.as_ref().map(|tw| tw.label()),
@@ -1556,17 +1600,27 @@ impl DisturbanceTrial {
 /// Which of `trials` (the pick as flown first) flies: the admissible one whose gust leaves
 /// the least swing, the pick as flown on a tie or when no raised design is admissible.
 fn choose_disturbance(trials: &[DisturbanceTrial], settings: &SelectionSettings) -> usize {
-    let swing = |t: &DisturbanceTrial| t.gust.map_or(f64::INFINITY, |g| g.swing_iae);
-    let mut chosen = 0;
-    for (i, trial) in trials.iter().enumerate().skip(1) {
-        let incumbent = &trials[chosen];
-        if trial.admissible(settings)
-            && (!incumbent.admissible(settings) || swing(trial) < swing(incumbent))
-        {
-            chosen = i;
+    least_admissible(trials.iter().map(|t| {
+        t.admissible(settings)
+            .then(|| t.gust.map_or(f64::INFINITY, |g| g.swing_iae))
+    }))
+}
+
+/// Of designs' costs (`None` or not finite: not admissible; the pick as flown first), the
+/// index of the admissible one of least cost: the first on a tie, and the first when none
+/// after it is admissible.
+fn least_admissible(costs: impl IntoIterator<Item = Option<f64>>) -> usize {
+    let mut chosen = (0, None::<f64>);
+    for (i, cost) in costs.into_iter().enumerate() {
+        let cost = cost.filter(|c| c.is_finite());
+        match (i, cost, chosen.1) {
+            (0, c, _) => chosen = (0, c),
+            (_, Some(c), None) => chosen = (i, Some(c)),
+            (_, Some(c), Some(best)) if c < best => chosen = (i, Some(c)),
+            _ => {}
         }
     }
-    chosen
+    chosen.0
 }
 
 /// The disturbance estimate of the passed pick `model` designed on the twin `twin`
@@ -1643,6 +1697,89 @@ fn design_disturbance(
         })).collect::<Vec<_>>(),
     });
     let (_, _, model) = designs.swap_remove(chosen);
+    Ok((model, report))
+}
+
+/// One trust of the swing estimate tried on the twin.
+struct TrustTrial {
+    factor: f64,
+    noise: f64,
+    passed: bool,
+    step_excess: f64,
+    gust: Option<TwinGust>,
+}
+
+impl TrustTrial {
+    /// The twin swing the design is judged by, when it may fly: within every bound and
+    /// back on the setpoint after the gust within the twin's settle bound.
+    fn cost(&self, settings: &SelectionSettings) -> Option<f64> {
+        let gust = self.gust?;
+        (self.passed && gust.resettle <= settings.twin_bounds.settle)
+            .then_some(self.step_excess + gust.swing_iae)
+    }
+}
+
+/// The swing estimate's trust of the passed pick `model` designed on the twin `twin`
+/// (`SelectionSettings::trust_factors`): the pick as designed and each raised swing
+/// measurement noise are judged on every flight of the selection (`judge`) and flown on
+/// the twin's gust, and the admissible one of least twin swing (the step's excess plus the
+/// gust's IAE) is taken, the pick as designed on a tie or when none is admissible. Returns
+/// the model, carrying the noise taken, and the report for `control_check.trust_design`.
+fn design_trust(
+    model: LinearModel,
+    mpc_settings: &MpcSettings,
+    factors: &[f64],
+    twin: &TwinPlant,
+    settings: &SelectionSettings,
+    judge: impl Fn(&LinearModel, MpcController) -> Result<(CandidateFigures, Verdict), ControlError>
+        + Sync,
+) -> Result<(LinearModel, serde_json::Value), ControlError> {
+    let base =
+        crate::control::mpc::settings_for(&model, mpc_settings.clone())?.swing_measurement_noise();
+    let mut designs = vec![(1.0, model.clone())];
+    for &f in factors.iter().filter(|&&f| f > 1.0) {
+        if designs.iter().all(|(g, _)| *g != f) {
+            let mut m = model.clone();
+            m.diagnostics.swing_measurement_noise = Some(base * f);
+            designs.push((f, m));
+        }
+    }
+    // Each design's flights depend on nothing flown for another: one per core. The pick
+    // as designed is judged again: the disturbance design may have changed it.
+    let trials = crate::parallel::map(
+        designs.iter().collect::<Vec<_>>(),
+        |(factor, m)| -> Result<TrustTrial, ControlError> {
+            let mpc = MpcController::new(m, mpc_settings.clone())?;
+            let (figures, verdict) = judge(m, mpc.fresh_copy()?)?;
+            let passed = verdict.passed();
+            let gust = if passed { Some(twin.gust(mpc)?) } else { None };
+            Ok(TrustTrial {
+                factor: *factor,
+                noise: base * factor,
+                passed,
+                step_excess: figures.twin.map_or(f64::INFINITY, |f| f.swing_excess),
+                gust,
+            })
+        },
+    )
+    .into_iter()
+    .collect::<Result<Vec<_>, _>>()?;
+    let chosen = least_admissible(trials.iter().map(|t| t.cost(settings)));
+    let finite = |x: f64| x.is_finite().then_some(x);
+    let report = json!({
+        "factor": trials[chosen].factor,
+        "kf_swing_measurement_noise": trials[chosen].noise,
+        "tried": trials.iter().map(|t| json!({
+            "factor": t.factor,
+            "kf_swing_measurement_noise": t.noise,
+            "passed": t.passed,
+            "step_swing_excess": finite(t.step_excess),
+            "gust_swing_iae": t.gust.and_then(|g| finite(g.swing_iae)),
+            "gust_resettle": t.gust.and_then(|g| finite(g.resettle)),
+            "cost": t.cost(settings).and_then(finite),
+        })).collect::<Vec<_>>(),
+    });
+    let (_, model) = designs.swap_remove(chosen);
     Ok((model, report))
 }
 
@@ -2500,6 +2637,52 @@ mod tests {
             let err = s.validate().unwrap_err().to_string();
             assert!(err.contains("disturbance_factors"), "{err}");
         }
+    }
+
+    #[test]
+    fn the_trust_factors_are_at_least_one() {
+        for bad in [vec![], vec![0.5], vec![1.0, f64::NAN], vec![f64::INFINITY]] {
+            let s = SelectionSettings {
+                trust_factors: bad,
+                ..SelectionSettings::default()
+            };
+            let err = s.validate().unwrap_err().to_string();
+            assert!(err.contains("trust_factors"), "{err}");
+        }
+    }
+
+    #[test]
+    fn the_least_admissible_design_flies_and_the_first_keeps_ties() {
+        assert_eq!(least_admissible([Some(2.0), Some(1.0), Some(1.5)]), 1);
+        assert_eq!(least_admissible([Some(1.0), Some(1.0)]), 0);
+        // Not admissible, or no finite cost: never taken over the first.
+        assert_eq!(least_admissible([Some(2.0), None, Some(f64::NAN)]), 0);
+        assert_eq!(least_admissible([Some(2.0), Some(f64::INFINITY)]), 0);
+        // The first not admissible: any admissible one after it flies, the least of them.
+        assert_eq!(least_admissible([None, Some(5.0), Some(4.0)]), 2);
+        assert_eq!(least_admissible([Some(f64::NAN), None]), 0);
+    }
+
+    /// A trust is judged by its twin swing (the step's excess plus the gust's IAE) only
+    /// where it passed every bound and settled after the gust within the twin's bound.
+    #[test]
+    fn a_trust_is_judged_by_its_twin_swing_only_where_it_passed_and_resettled() {
+        let s = SelectionSettings::default();
+        let trial = |passed: bool, gust: Option<(f64, f64)>| TrustTrial {
+            factor: 10.0,
+            noise: 0.1,
+            passed,
+            step_excess: 0.5,
+            gust: gust.map(|(swing_iae, resettle)| TwinGust {
+                swing_iae,
+                resettle,
+            }),
+        };
+        assert_eq!(trial(true, Some((3.0, 1.0))).cost(&s), Some(3.5));
+        assert_eq!(trial(false, Some((3.0, 1.0))).cost(&s), None);
+        assert_eq!(trial(true, None).cost(&s), None);
+        let late = s.twin_bounds.settle + 0.1;
+        assert_eq!(trial(true, Some((3.0, late))).cost(&s), None);
     }
 
     /// The strongest-filter pass designs its estimator once, with the noise in the model's

@@ -343,6 +343,12 @@ impl TwinPlant {
         &self.label
     }
 
+    /// Whether the twin's swing is estimated from its IMU (the flight's swing source),
+    /// rather than measured.
+    pub fn estimates_swing(&self) -> bool {
+        self.scenario.sensors.swing == SwingSource::Imu
+    }
+
     /// Fly the MPC of `model` with `settings` (designed for this twin's axes) on the step; a
     /// diverged flight or one handed back to PX4 (a tick that failed) gives
     /// [`TwinFlight::diverged`].
