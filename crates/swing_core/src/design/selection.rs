@@ -2628,26 +2628,23 @@ mod tests {
     }
 
     #[test]
-    fn the_disturbance_factors_are_at_least_one() {
+    fn the_disturbance_and_trust_factors_are_at_least_one() {
         for bad in [vec![], vec![0.5], vec![1.0, f64::NAN], vec![f64::INFINITY]] {
-            let s = SelectionSettings {
-                disturbance_factors: bad,
+            let disturbance = SelectionSettings {
+                disturbance_factors: bad.clone(),
                 ..SelectionSettings::default()
             };
-            let err = s.validate().unwrap_err().to_string();
-            assert!(err.contains("disturbance_factors"), "{err}");
-        }
-    }
-
-    #[test]
-    fn the_trust_factors_are_at_least_one() {
-        for bad in [vec![], vec![0.5], vec![1.0, f64::NAN], vec![f64::INFINITY]] {
-            let s = SelectionSettings {
+            let trust = SelectionSettings {
                 trust_factors: bad,
                 ..SelectionSettings::default()
             };
-            let err = s.validate().unwrap_err().to_string();
-            assert!(err.contains("trust_factors"), "{err}");
+            for (s, field) in [
+                (disturbance, "disturbance_factors"),
+                (trust, "trust_factors"),
+            ] {
+                let err = s.validate().unwrap_err().to_string();
+                assert!(err.contains(field), "{err}");
+            }
         }
     }
 
