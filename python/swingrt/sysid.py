@@ -745,11 +745,13 @@ def select_for_control(
     (``diagnostics['disturbance_noise']``, ``diagnostics['gust_noise']``;
     ``control_check['disturbance_design']``). On a swing estimated from the IMU, the pick
     that passed then has its trust in that estimate designed there: its swing measurement
-    noise as designed and raised by each of ``trust_factors`` above 1 (default 1, 10, 30,
-    100) is judged on every flight again and flown on the twin's gust (both flights with the
-    twin's IMU noise), and of those that pass and resettle after the gust the one whose
-    step excess plus gust swing IAE is least is taken (``control_check['trust_design']``;
-    the model carries its noise). A candidate that passes every other flight
+    noise as designed and raised by each of ``trust_factors`` above 1 (default 1: none;
+    e.g. 1, 10, 30, 100) is judged on every flight again and flown on the twin's gust (both
+    flights with the twin's IMU noise), and of those that pass and resettle after the gust
+    the one whose step excess plus gust swing IAE is least is taken
+    (``control_check['trust_design']``; the model carries its noise). Off by default: the
+    twin's flights start from rest, and a raised noise damps a swing already present
+    slowly. A candidate that passes every other flight
     also flies the twin's step with every link of the payload ``1 ∓ payload_tolerance``
     times as long (default 0.1: the white-box's lengths are estimates) and must settle
     there within the
