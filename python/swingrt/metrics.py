@@ -22,7 +22,8 @@ the step direction), over the window after the step:
   the payload by a/g (0.1 m/s² is 0.6°) without any swing about that lean; this is the swing
   about it. The lean is quasi-static: a payload follows the vehicle's acceleration only
   below its own swing rate, so the span averages out the vehicle's faster wobbles (1–2 Hz,
-  which a payload on 1 m answers with 0.15× the lean, the other way). It never hides a free
+  which a payload on 1 m answers with a third to a fifteenth of the lean, the other way;
+  0.15 at 1.4 Hz). It never hides a free
   swing on a cable longer than 0.25 m (a swing rate under 1 Hz, where the span passes the
   pull with a positive gain): the cable's pull on the vehicle is (m_p/m_Q)·g·θ, so a swing
   the controller leaves alone counts more than once;
