@@ -617,11 +617,7 @@ impl SelectionSettings {
         positive("twin_bounds.late_error", self.twin_bounds.late_error)?;
         design_factors("noise_factors", &self.noise_factors, "the noise")?;
         design_factors("disturbance_factors", &self.disturbance_factors, "the rate")?;
-        design_factors(
-            "trust_factors",
-            &self.trust_factors,
-            "the trust as designed",
-        )?;
+        design_factors("trust_factors", &self.trust_factors, "the trust")?;
         non_negative("gust_noise", self.gust_noise)?;
         positive("wander_sigmas", self.wander_sigmas)?;
         if !(0.0..1.0).contains(&self.payload_tolerance) {
