@@ -846,6 +846,11 @@ fn mpc_inner(u: &mut Unstructured<'_>) -> AResult<()> {
         gust_time: positive(u, 2.0)?,
         kf_measurement_noise: positive(u, 0.01)?,
         kf_swing_measurement_noise: opt(u, |u| positive(u, 0.01))?,
+        kf_start_spread: if u.arbitrary()? {
+            0.0
+        } else {
+            positive(u, 3.0)?
+        },
         solver: *u.choose(&[QpSolverKind::ActiveSet, QpSolverKind::Clarabel])?,
         measured_state: u.arbitrary()?,
     };

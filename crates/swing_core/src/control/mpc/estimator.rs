@@ -14,6 +14,18 @@
 //! one entry (the delay shift, the lagged swings, the constant disturbances): they are
 //! found once and the prediction copies them, so its cost is that of the few dense rows
 //! (the newest frame, a position), not of the whole square A.
+//!
+//! The start. When the controller takes over, the delay stack is a guess (every frame the
+//! current measurement): a swing the payload already has is in it at one phase only, and
+//! the steady gain, designed for an estimate as good as the filter's own, would learn the
+//! rest as slowly as it learns any process noise; the slower the more it trusts the model
+//! over the measurement. [`SteadyStateKalman::with_start`] gives the filter a prior that
+//! says so, P₀ = P + Σ₀ (Σ₀ diagonal: the spread of the guess), and precomputes the
+//! time-varying gains L_k = P_k Cᵀ (C P_k Cᵀ + V)⁻¹ of the Riccati recursion
+//! P_{k+1} = A (P_k − L_k C P_k) Aᵀ + W from it, for a given number of ticks or until they
+//! are within a tolerance of the steady L. A tick of the start costs what a steady tick
+//! costs (another stored matrix in the same product); the recursion runs once, at design,
+//! with A applied by its copy and dense rows (O(d·nx²) per step for d dense rows).
 
 use nalgebra::{DMatrix, DVector};
 
@@ -37,6 +49,13 @@ pub struct SteadyStateKalman {
     b_dense: DMatrix<f64>,
     c_dense: DVector<f64>,
     dense_values: DVector<f64>,
+    /// Gains of the start (module docs), first tick first; empty: steady from the start.
+    start_gains: Vec<DMatrix<f64>>,
+    /// The process and measurement covariances the filter was designed with.
+    w: DMatrix<f64>,
+    v: DMatrix<f64>,
+    /// Corrections made since the last [`SteadyStateKalman::restart`].
+    tick: usize,
 }
 
 /// Rows of (A, B, c̃) that copy one entry of the state (a single 1 in A, nothing else) as
@@ -119,7 +138,124 @@ impl SteadyStateKalman {
             gain,
             p,
             ny,
+            start_gains: Vec::new(),
+            w: w.clone(),
+            v: v.clone(),
+            tick: 0,
         })
+    }
+
+    /// This filter with a start (module docs): after [`Self::restart`] its gains are those
+    /// of the prior P₀ = P + diag(`spread`) (`spread`: the variance of the restart's guess of
+    /// each state), for at most `max_ticks` ticks and until every entry is within `tol`
+    /// × the largest |entry| of the steady gain; all zeros keeps the steady gain.
+    pub fn with_start(
+        mut self,
+        spread: &[f64],
+        max_ticks: usize,
+        tol: f64,
+    ) -> Result<Self, ControlError> {
+        let nx = self.p.nrows();
+        let ny = self.ny;
+        if spread.len() != nx || spread.iter().any(|s| !(s.is_finite() && *s >= 0.0)) {
+            return Err(ControlError::Model(format!(
+                "Kalman filter start: the spread needs {nx} finite variances ≥ 0 (got {} entries)",
+                spread.len()
+            )));
+        }
+        self.start_gains.clear();
+        if spread.iter().all(|s| *s == 0.0) {
+            return Ok(self);
+        }
+        let (w, v) = (self.w.clone(), self.v.clone());
+        let scale = self.gain.amax().max(f64::MIN_POSITIVE);
+        let mut p = self.p.clone();
+        for (i, s) in spread.iter().enumerate() {
+            p[(i, i)] += s;
+        }
+        for _ in 0..max_ticks {
+            let s = p.view((0, 0), (ny, ny)) + &v;
+            let cp = p.rows(0, ny).into_owned();
+            let lt = s
+                .cholesky()
+                .ok_or_else(|| {
+                    ControlError::Synthesis(
+                        "Kalman filter start: innovation covariance not positive definite".into(),
+                    )
+                })?
+                .solve(&cp);
+            let gain = lt.transpose();
+            if (&gain - &self.gain).amax() <= tol * scale {
+                break;
+            }
+            let post = &p - &gain * &cp;
+            p = self.a_sandwich(&post) + &w;
+            // Round-off keeps P symmetric only to the last bits; the recursion needs it exact.
+            p = (&p + p.transpose()) * 0.5;
+            self.start_gains.push(gain);
+        }
+        Ok(self)
+    }
+
+    /// A X Aᵀ for a symmetric X, with A applied by its copy and dense rows.
+    fn a_sandwich(&self, x: &DMatrix<f64>) -> DMatrix<f64> {
+        let ax = self.a_times(x);
+        self.a_times(&ax.transpose())
+    }
+
+    /// A X (X with nx rows), from the copy rows and the dense rows of A.
+    fn a_times(&self, x: &DMatrix<f64>) -> DMatrix<f64> {
+        let mut out = DMatrix::zeros(x.nrows(), x.ncols());
+        for &(r, src) in &self.copies {
+            out.row_mut(r).copy_from(&x.row(src));
+        }
+        let dense = &self.a_dense * x;
+        for (k, &r) in self.dense_rows.iter().enumerate() {
+            out.row_mut(r).copy_from(&dense.row(k));
+        }
+        out
+    }
+
+    /// Set `xi[col]` so that the model's prediction of entry `row` from `xi`, with the
+    /// entries `at_rest` read as 0, under the input `u` is `xi[row]` itself (entry `col`
+    /// entering row `row` linearly); `xi` is left as it is when `col` does not enter it.
+    pub fn hold_entry(
+        &self,
+        xi: &mut DVector<f64>,
+        u: &DVector<f64>,
+        row: usize,
+        col: usize,
+        at_rest: impl Fn(usize) -> bool,
+    ) {
+        let Some(k) = self.dense_rows.iter().position(|&r| r == row) else {
+            return;
+        };
+        let gain = self.a_dense[(k, col)];
+        if gain == 0.0 {
+            return;
+        }
+        xi[col] = 0.0;
+        let mut predicted = self.c_dense[k];
+        for (j, x) in xi.iter().enumerate() {
+            if !at_rest(j) {
+                predicted += self.a_dense[(k, j)] * x;
+            }
+        }
+        for (i, ui) in u.iter().enumerate() {
+            predicted += self.b_dense[(k, i)] * ui;
+        }
+        xi[col] = (xi[row] - predicted) / gain;
+    }
+
+    /// Number of start gains (0: the filter is steady from its first tick).
+    pub fn start_ticks(&self) -> usize {
+        self.start_gains.len()
+    }
+
+    /// The gain of the start's tick `k` (0 = the first correction after a restart); the
+    /// steady gain from [`Self::start_ticks`] on.
+    pub fn start_gain(&self, k: usize) -> &DMatrix<f64> {
+        self.start_gains.get(k).unwrap_or(&self.gain)
     }
 
     /// Filter gain L (nx × ny).
@@ -132,10 +268,18 @@ impl SteadyStateKalman {
         &self.p
     }
 
-    /// Overwrite the a-priori estimate (used on reset).
+    /// Overwrite the a-priori estimate and go on at the steady gain (taking over an
+    /// estimate as good as the filter's own).
     pub fn set_prior(&mut self, xi: &[f64]) {
         self.prior.copy_from_slice(xi);
         self.post.copy_from_slice(xi);
+        self.tick = self.start_gains.len();
+    }
+
+    /// Overwrite the a-priori estimate with a guess and run the start (module docs) again.
+    pub fn restart(&mut self, xi: &[f64]) {
+        self.set_prior(xi);
+        self.tick = 0;
     }
 
     /// Measurement update with y (its first ny entries are the measurement); returns the a-posteriori estimate ξ̂_{k|k}.
@@ -144,7 +288,9 @@ impl SteadyStateKalman {
             self.innov[i] = y[i] - self.prior[i];
         }
         self.post.copy_from(&self.prior);
-        self.post.gemv(1.0, &self.gain, &self.innov, 1.0);
+        let gain = self.start_gains.get(self.tick).unwrap_or(&self.gain);
+        self.post.gemv(1.0, gain, &self.innov, 1.0);
+        self.tick = (self.tick + 1).min(self.start_gains.len());
         &self.post
     }
 

@@ -92,6 +92,16 @@ pub struct MpcSettings {
     /// `kf_measurement_noise`); a model that carries a larger one
     /// (`Diagnostics::swing_measurement_noise`, from the selection's noise design) raises it.
     pub kf_swing_measurement_noise: Option<f64>,
+    /// Spread of the filter's first guess of every swing in the delay stack when the
+    /// controller takes over, as a multiple of the swing's measurement noise std (the guess,
+    /// a steady history, holds a swing the payload already has at one phase only): the
+    /// filter starts from that prior and its gain settles to the steady one
+    /// ([`SteadyStateKalman::with_start`]); 0 = steady from the first tick. Relative to the
+    /// measurement noise so that a model trusted over its measurement (a larger swing
+    /// measurement noise, the selection's trust design) still learns a swing it did not
+    /// cause as fast as it would measure it: raising V by f² alone would shrink the prior
+    /// by f² as well, since the gain depends only on the ratios of P₀, W and V.
+    pub kf_start_spread: f64,
     /// QP solver for ticks with an active bound: `clarabel` or `active_set`.
     pub solver: QpSolverKind,
     /// Use the measured delay stack as the state and estimate only the disturbances
@@ -133,6 +143,12 @@ impl Default for MpcSettings {
             gust_time: 2.0,
             kf_measurement_noise: 0.01,
             kf_swing_measurement_noise: None,
+            // Off: at 3 (a guess worth a ninth of a measurement), which lets the trust
+            // design's picks damp a swing already there at the takeover as the picks as
+            // designed do, some vehicles the twin is not swing more after the step, and on
+            // PX4 SITL's model every raised trust drifts in the selection's linear hold
+            // (docs/selection.md).
+            kf_start_spread: 0.0,
             solver: QpSolverKind::ActiveSet,
             measured_state: false,
         }
@@ -198,6 +214,7 @@ impl MpcSettings {
         if let Some(r) = self.kf_swing_measurement_noise {
             positive("kf_swing_measurement_noise", r)?;
         }
+        non_negative("kf_start_spread", self.kf_start_spread)?;
         Ok(())
     }
 }
@@ -354,6 +371,108 @@ pub(crate) fn measurement_variances(settings: &MpcSettings, sources: &[Measured]
             }
         })
         .collect()
+}
+
+/// Diagonal of the Kalman filter's start spread Σ₀ over ξ = [z; s⁻; d; g]
+/// ([`SteadyStateKalman::with_start`]): (`kf_start_spread` × the swing measurement noise)²
+/// on every swing and swing rate of the delay stack and on the lagged swings; nothing on the
+/// velocities (measured as well before the takeover as after) and on the disturbances.
+pub(crate) fn start_spread(
+    settings: &MpcSettings,
+    n: usize,
+    aug: &Augmented,
+    sources: &[Measured],
+) -> Vec<f64> {
+    let var = (settings.kf_start_spread * settings.swing_measurement_noise()).powi(2);
+    let nz = aug.nm - aug.lag_copies.len();
+    (0..aug.nx())
+        .map(|i| {
+            if i < nz {
+                match sources[i % n] {
+                    Measured::V(_) => 0.0,
+                    Measured::Swing(_) | Measured::SwingRate(_) => var,
+                }
+            } else if i < aug.nm {
+                var
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// The start's length cap [s] and tolerance (relative to the steady gain's largest entry).
+/// Cut at the stack's length (when every frame of the guess has shifted out) instead, the
+/// start ends far from the steady gain when the filter trusts its model 30-100× more, and
+/// the jump left the default step's trust picks swinging (seed 1: 3.7 deg·s against 0.5).
+const START_MAX_S: f64 = 10.0;
+const START_TOL: f64 = 1e-3;
+
+/// `kf` with the start of the `spread` ([`start_spread`]) for a model of tick `dt`.
+pub(crate) fn with_start(
+    kf: SteadyStateKalman,
+    spread: &[f64],
+    dt: f64,
+) -> Result<SteadyStateKalman, ControlError> {
+    kf.with_start(spread, (START_MAX_S / dt).ceil() as usize, START_TOL)
+}
+
+/// The Kalman filter of the MPC: the steady gain for the settings' process and measurement
+/// noise, with the start of `settings.kf_start_spread`.
+fn mpc_filter(
+    aug: &Augmented,
+    settings: &MpcSettings,
+    dt: f64,
+    n: usize,
+    sources: &[Measured],
+) -> Result<SteadyStateKalman, ControlError> {
+    let w = DMatrix::from_diagonal(&DVector::from_vec(process_noise(
+        settings, dt, n, aug, sources,
+    )));
+    let v = DMatrix::from_diagonal(&DVector::from_vec(measurement_variances(settings, sources)));
+    let kf = SteadyStateKalman::new(aug.a.clone(), aug.b.clone(), aug.c.clone(), n, &w, &v)?;
+    with_start(kf, &start_spread(settings, n, aug, sources), dt)
+}
+
+/// Start the disturbance estimate of a takeover from a hover: the vehicle was holding its
+/// velocity under the input `u` it takes over with, so with the payload hanging still
+/// (every swing of the filter's state read as 0) and the velocities of `xi` each axis'
+/// velocity row of the filter's model must predict the velocity it measures; the constant
+/// disturbance that enters that row takes up the difference, written into `xi`. The
+/// filter's state is the newest frame and its delays from `offset` on (`nz` entries, then
+/// the lagged swings up to `nm`), then the disturbances. An identified model's offset c̃
+/// can hold a drift the vehicle does not have (on PX4 SITL up to 0.26 m/s² at rest: the
+/// IMU swing estimate's mean over one-signed training steps, carried into the velocity
+/// row); started at zero, the filter learns it only at the disturbance's rate, and the
+/// MPC meanwhile pushes the vehicle against a drift that is not there (0.3–0.6 m/s before
+/// the step). A model right about the hover gets zero. The swings are read as 0 because a
+/// swing at the takeover is not steady: the steady history holds it at one phase, and the
+/// velocity row's answer to that would be taken up as a lasting force.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn hover_disturbance(
+    kf: &SteadyStateKalman,
+    offset: usize,
+    nz: usize,
+    nm: usize,
+    sources: &[Measured],
+    disturbance: DisturbanceModel,
+    u: &DVector<f64>,
+    xi: &mut DVector<f64>,
+) {
+    let n = sources.len();
+    let swing = |j: usize| {
+        j >= offset
+            && j < offset + nm
+            && (j - offset >= nz || !matches!(sources[(j - offset) % n], Measured::V(_)))
+    };
+    for (k, src) in sources.iter().enumerate() {
+        let Measured::V(axis) = *src else { continue };
+        let entry = match disturbance {
+            DisturbanceModel::State => k,
+            DisturbanceModel::Velocity | DisturbanceModel::Input => axis,
+        };
+        kf.hold_entry(xi, u, offset + k, offset + nm + entry, swing);
+    }
 }
 
 /// What each model state of the newest frame measures, then each axis' velocity index and
@@ -541,13 +660,7 @@ impl MpcController {
             settings.horizon,
             settings.control_horizon,
         )?;
-        let w = DMatrix::from_diagonal(&DVector::from_vec(process_noise(
-            &settings, dt, n, &aug, &sources,
-        )));
-        let v = DMatrix::from_diagonal(&DVector::from_vec(measurement_variances(
-            &settings, &sources,
-        )));
-        let kf = SteadyStateKalman::new(aug.a.clone(), aug.b.clone(), aug.c.clone(), n, &w, &v)?;
+        let kf = mpc_filter(&aug, &settings, dt, n, &sources)?;
         let bounds = Bounds {
             u_max: settings.acc_max,
             du_max: settings.jerk_max.map(|j| j * dt),
@@ -588,25 +701,7 @@ impl MpcController {
         positive("kf_swing_measurement_noise", r)?;
         let mut out = self.fresh_copy()?;
         out.settings.kf_swing_measurement_noise = Some(r);
-        let w = DMatrix::from_diagonal(&DVector::from_vec(process_noise(
-            &out.settings,
-            out.dt,
-            out.n,
-            &out.aug,
-            &out.sources,
-        )));
-        let v = DMatrix::from_diagonal(&DVector::from_vec(measurement_variances(
-            &out.settings,
-            &out.sources,
-        )));
-        out.kf = SteadyStateKalman::new(
-            out.aug.a.clone(),
-            out.aug.b.clone(),
-            out.aug.c.clone(),
-            out.n,
-            &w,
-            &v,
-        )?;
+        out.kf = mpc_filter(&out.aug, &out.settings, out.dt, out.n, &out.sources)?;
         Ok(out)
     }
 
@@ -796,7 +891,17 @@ impl SwingController for MpcController {
         let nm = self.aug.nm;
         self.xi_last.fill(0.0);
         self.xi_last.rows_mut(0, nm).copy_from(&self.y);
-        self.kf.set_prior(self.xi_last.as_slice());
+        hover_disturbance(
+            &self.kf,
+            0,
+            self.nz,
+            nm,
+            &self.sources,
+            self.settings.disturbance,
+            &self.u_prev,
+            &mut self.xi_last,
+        );
+        self.kf.restart(self.xi_last.as_slice());
         self.u_sol.fill(0.0);
         for j in 0..self.cond.nc {
             for a in 0..m {

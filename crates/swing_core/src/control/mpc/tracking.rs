@@ -43,8 +43,9 @@ use super::condense::Augmented;
 use super::estimator::SteadyStateKalman;
 use super::qp::Bounds;
 use super::{
-    check_model, frame_sources, measurement_variances, process_noise, push_frame, qp_backend,
-    settings_for, solve_bounded, Backend, MpcSettings,
+    check_model, frame_sources, hover_disturbance, measurement_variances, process_noise,
+    push_frame, qp_backend, settings_for, solve_bounded, start_spread, with_start, Backend,
+    MpcSettings,
 };
 use crate::config::{positive, ConfigError};
 use crate::control::layout::Measured;
@@ -414,7 +415,13 @@ impl TrackingMpc {
         let mut v = vec![tracking.kf_position_noise.powi(2); m];
         v.extend(measurement_variances(&settings, &sources));
         let vm = DMatrix::from_diagonal(&DVector::from_vec(v));
-        let kf = SteadyStateKalman::new(a, b, c, m + n, &wm, &vm)?;
+        let mut spread = vec![0.0; m];
+        spread.extend(start_spread(&settings, n, &aug, &sources));
+        let kf = with_start(
+            SteadyStateKalman::new(a, b, c, m + n, &wm, &vm)?,
+            &spread,
+            dt,
+        )?;
         let bounds = Bounds {
             u_max: settings.acc_max,
             du_max: settings.jerk_max.map(|j| j * dt),
@@ -617,7 +624,17 @@ impl SwingController for TrackingMpc {
         }
         self.xi.fill(0.0);
         self.xi.rows_mut(0, m + self.nm0).copy_from(&self.y);
-        self.kf.set_prior(self.xi.as_slice());
+        hover_disturbance(
+            &self.kf,
+            m,
+            self.nz,
+            self.nm0,
+            &self.sources,
+            self.settings.disturbance,
+            &self.u_prev,
+            &mut self.xi,
+        );
+        self.kf.restart(self.xi.as_slice());
         for j in 0..self.nc {
             for a in 0..m {
                 self.u_sol[j * m + a] = self.u_prev[a];
