@@ -344,8 +344,9 @@ pub struct SelectionSettings {
     /// (`Diagnostics::swing_measurement_noise`). `[1]` (the default): as designed, nothing
     /// flown. Every twin flight starts from a payload at rest, so the twin cannot see what
     /// a raised noise costs: a swing already there when the MPC takes over (a pick-up, a
-    /// bump, a previous manoeuvre) is damped from the model's prediction, which knows
-    /// nothing of it, and so slowly.
+    /// bump, a previous manoeuvre), which the model's prediction knows nothing of, is
+    /// learned slowly unless the filter's start spreads its first guess
+    /// (`MpcSettings::kf_start_spread`).
     pub trust_factors: Vec<f64>,
     /// How far the twin's payload may be from the one it carries, as a fraction of its
     /// lengths: a candidate that passes every other flight also flies the twin's step with
@@ -560,9 +561,10 @@ impl Default for SelectionSettings {
             // A 1 m/s gust on a multirotor's drag of about 0.3 /s. Twice that refused the
             // nominal flights of `robustness` seed 1's sample 395 (the late gust).
             gust_noise: 0.3,
-            // Off: the designs it takes (10-100x) damp a swing the vehicle's motion did not
-            // cause slowly, which no flight of the twin shows (docs/selection.md). On, as
-            // measured there: 1, 10, 30, 100.
+            // Off: the designs it takes (10-100x) learn a swing already there at the takeover
+            // slowly, and the filter's start that mends that (`MpcSettings::kf_start_spread`)
+            // costs some vehicles the twin is not more than the design gains
+            // (docs/selection.md). On, as measured there: 1, 10, 30, 100.
             trust_factors: vec![1.0],
             payload_tolerance: 0.1,
             slow_motor_lag: 0.04,
@@ -1718,6 +1720,8 @@ struct TrustTrial {
     factor: f64,
     noise: f64,
     passed: bool,
+    /// The bounds the design misses.
+    refused: Vec<String>,
     step_excess: f64,
     gust: Option<TwinGust>,
 }
@@ -1770,6 +1774,7 @@ fn design_trust(
                 factor: *factor,
                 noise: base * factor,
                 passed,
+                refused: verdict.reasons(),
                 step_excess: figures.twin.map_or(f64::INFINITY, |f| f.swing_excess),
                 gust,
             })
@@ -1788,6 +1793,7 @@ fn design_trust(
                 "factor": t.factor,
                 "kf_swing_measurement_noise": t.noise,
                 "passed": t.passed,
+                "refused": t.refused,
                 "step_swing_excess": finite(t.step_excess),
                 "gust_swing_iae": swing_iae,
                 "gust_resettle": resettle,
@@ -2685,6 +2691,7 @@ mod tests {
             factor: 10.0,
             noise: 0.1,
             passed,
+            refused: Vec::new(),
             step_excess: 0.5,
             gust: gust.map(|(swing_iae, resettle)| TwinGust {
                 swing_iae,
