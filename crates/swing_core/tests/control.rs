@@ -766,43 +766,6 @@ fn the_start_damps_a_swing_the_mpc_takes_over_as_fast_trusted_or_not() {
     );
 }
 
-/// Largest |velocity| [m/s] of `settings`' MPC holding still for `secs` from a takeover
-/// in hover on `plant`'s own model with the offset `drift` [m/s per tick] added to the
-/// MPC's model's velocity row, and its velocity disturbance right after the reset.
-fn hold_after_takeover(plant_model: &LinearModel, drift: f64, secs: f64) -> (f64, f64) {
-    let mut m = plant_model.clone();
-    m.c[0] += drift;
-    let mut ctrl = MpcController::new(&m, MpcSettings::default()).unwrap();
-    let mut plant = LinearPlant::new(plant_model).unwrap();
-    ctrl.reset(&plant.state(), &[0.0]);
-    let d0 = ctrl.disturbance()[0];
-    let mut u = [0.0];
-    let mut worst = 0.0_f64;
-    for _ in 0..(secs / TS) as usize {
-        ctrl.step(&plant.state(), &[0.0], &mut u).unwrap();
-        plant.step(&u);
-        worst = worst.max(plant.state()[0].v.abs());
-    }
-    (worst, d0)
-}
-
-#[test]
-fn a_takeover_in_hover_starts_the_disturbance_where_the_hover_holds() {
-    let m = model(0.2, 1.0, 8);
-    assert_eq!(m.states[0], "vn");
-    // A model right about the hover: nothing to take up, and the vehicle stays put.
-    let (still, d0) = hold_after_takeover(&m, 0.0, 3.0);
-    assert!(d0.abs() < 1e-12 && still < 1e-9, "{d0} {still}");
-    // A model whose offset holds a drift of 0.25 m/s² the vehicle does not have (as on
-    // PX4 SITL): the velocity disturbance starts at minus that drift, per second, and the
-    // MPC does not push the vehicle against it. Started at zero, it moved the vehicle
-    // by 0.3–0.6 m/s before the step.
-    let drift = 0.25 * TS;
-    let (moved, d0) = hold_after_takeover(&m, drift, 3.0);
-    assert!((d0 + drift / TS).abs() < 1e-9, "{d0}");
-    assert!(moved < 1e-9, "{moved}");
-}
-
 #[test]
 fn default_tuning_damps_the_swing_on_every_seed_payload() {
     // Plant: exact ZOH of the continuous pendulum (not the fitted model the MPC uses).

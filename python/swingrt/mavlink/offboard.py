@@ -554,8 +554,6 @@ class OffboardSession:
             None if swing_estimator is None else ImuSwingEstimator(dict(swing_estimator)),
             body_sensor,
         )
-        #: PX4's hold acceleration (N, E) [m/s²], latched as OFFBOARD is requested.
-        self.acc_hold: tuple[float, ...] = (0.0, 0.0)
         #: What the node's log says of its swing columns (Parquet metadata): with the cable
         #: sensor on the airframe, the source and its settings, so that a model identified on
         #: the log knows what to fly with (its swing columns are the world-frame angles).
@@ -824,19 +822,13 @@ class OffboardSession:
         return report
 
     def _neutral(self) -> None:
-        an, ae = self.acc_hold
-        self._setpoint(MASK_ACC_ALT_HOLD, (0.0, 0.0, self.alt_hold), (0.0, 0.0, 0.0), (an, ae, 0.0))
+        self._setpoint(
+            MASK_ACC_ALT_HOLD, (0.0, 0.0, self.alt_hold), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+        )
 
     def _engage(self) -> None:
-        """Latch the acceleration PX4's hold flies, stream it as the neutral setpoint, then
-        request OFFBOARD (only while the telemetry is fresh) until accepted."""
-        self._drain()
-        # What holds the vehicle still is not zero acceleration: an accelerometer bias tilts
-        # the EKF's attitude (PX4 SITL's hover: 0.27 m/s² North, -0.19 East), and a steady
-        # wind needs a lean. Taken over as the neutral setpoint and the controller's input
-        # at the takeover, the vehicle stays as PX4 held it; zero pushed it off by 0.3-0.6
-        # m/s before the step.
-        self.acc_hold = tuple(float(a) if math.isfinite(a) else 0.0 for a in self.tel.acc_sp[:2])
+        """Stream neutral setpoints, then request OFFBOARD (only while the telemetry is
+        fresh) until accepted."""
         t_end = time.monotonic() + self.prestream
         while time.monotonic() < t_end:
             self._drain()
@@ -989,8 +981,7 @@ def model_body_sensor(model_path) -> dict | None:
         raise ModelError(f"{p}: {exc}") from None
 
 
-#: P gain [1/s] of the East velocity hold (about PX4's hold acceleration) while a one-axis
-#: controller flies North.
+#: P gain [1/s] of the East velocity hold while a one-axis controller flies North.
 EAST_HOLD_GAIN = 1.0
 
 
@@ -1046,7 +1037,7 @@ def fly(
 
     def reset(tel):
         fill(tel, (0.0, 0.0))
-        controller.reset(state.copy(), np.asarray(session.acc_hold[:axes]))
+        controller.reset(state.copy(), np.zeros(axes))
 
     def policy(k, t, tel, rate):
         fill(tel, rate)
@@ -1068,10 +1059,7 @@ def fly(
                 (float(a[0]), v_e),
             )
         an = float(np.clip(a[0], -limit, limit))
-        if axes == 2:
-            ae = float(np.clip(a[1], -limit, limit))
-        else:
-            ae = session.acc_hold[1] - EAST_HOLD_GAIN * tel.vel[1]
+        ae = float(np.clip(a[1], -limit, limit)) if axes == 2 else -EAST_HOLD_GAIN * tel.vel[1]
         return (
             MASK_ACC_ALT_HOLD,
             (0.0, 0.0, session.alt_hold),

@@ -216,37 +216,6 @@ impl SteadyStateKalman {
         out
     }
 
-    /// Set `xi[col]` so that the model's prediction of entry `row` from `xi`, with the
-    /// entries `at_rest` read as 0, under the input `u` is `xi[row]` itself (entry `col`
-    /// entering row `row` linearly); `xi` is left as it is when `col` does not enter it.
-    pub fn hold_entry(
-        &self,
-        xi: &mut DVector<f64>,
-        u: &DVector<f64>,
-        row: usize,
-        col: usize,
-        at_rest: impl Fn(usize) -> bool,
-    ) {
-        let Some(k) = self.dense_rows.iter().position(|&r| r == row) else {
-            return;
-        };
-        let gain = self.a_dense[(k, col)];
-        if gain == 0.0 {
-            return;
-        }
-        xi[col] = 0.0;
-        let mut predicted = self.c_dense[k];
-        for (j, x) in xi.iter().enumerate() {
-            if !at_rest(j) {
-                predicted += self.a_dense[(k, j)] * x;
-            }
-        }
-        for (i, ui) in u.iter().enumerate() {
-            predicted += self.b_dense[(k, i)] * ui;
-        }
-        xi[col] = (xi[row] - predicted) / gain;
-    }
-
     /// Number of start gains (0: the filter is steady from its first tick).
     pub fn start_ticks(&self) -> usize {
         self.start_gains.len()

@@ -434,47 +434,6 @@ fn mpc_filter(
     with_start(kf, &start_spread(settings, n, aug, sources), dt)
 }
 
-/// Start the disturbance estimate of a takeover from a hover: the vehicle was holding its
-/// velocity under the input `u` it takes over with, so with the payload hanging still
-/// (every swing of the filter's state read as 0) and the velocities of `xi` each axis'
-/// velocity row of the filter's model must predict the velocity it measures; the constant
-/// disturbance that enters that row takes up the difference, written into `xi`. The
-/// filter's state is the newest frame and its delays from `offset` on (`nz` entries, then
-/// the lagged swings up to `nm`), then the disturbances. An identified model's offset c̃
-/// can hold a drift the vehicle does not have (on PX4 SITL up to 0.26 m/s² at rest: the
-/// IMU swing estimate's mean over one-signed training steps, carried into the velocity
-/// row); started at zero, the filter learns it only at the disturbance's rate, and the
-/// MPC meanwhile pushes the vehicle against a drift that is not there (0.3–0.6 m/s before
-/// the step). A model right about the hover gets zero. The swings are read as 0 because a
-/// swing at the takeover is not steady: the steady history holds it at one phase, and the
-/// velocity row's answer to that would be taken up as a lasting force.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn hover_disturbance(
-    kf: &SteadyStateKalman,
-    offset: usize,
-    nz: usize,
-    nm: usize,
-    sources: &[Measured],
-    disturbance: DisturbanceModel,
-    u: &DVector<f64>,
-    xi: &mut DVector<f64>,
-) {
-    let n = sources.len();
-    let swing = |j: usize| {
-        j >= offset
-            && j < offset + nm
-            && (j - offset >= nz || !matches!(sources[(j - offset) % n], Measured::V(_)))
-    };
-    for (k, src) in sources.iter().enumerate() {
-        let Measured::V(axis) = *src else { continue };
-        let entry = match disturbance {
-            DisturbanceModel::State => k,
-            DisturbanceModel::Velocity | DisturbanceModel::Input => axis,
-        };
-        kf.hold_entry(xi, u, offset + k, offset + nm + entry, swing);
-    }
-}
-
 /// What each model state of the newest frame measures, then each axis' velocity index and
 /// swing index in that frame.
 type FrameSources = (Vec<Measured>, Vec<usize>, Vec<usize>);
@@ -891,16 +850,6 @@ impl SwingController for MpcController {
         let nm = self.aug.nm;
         self.xi_last.fill(0.0);
         self.xi_last.rows_mut(0, nm).copy_from(&self.y);
-        hover_disturbance(
-            &self.kf,
-            0,
-            self.nz,
-            nm,
-            &self.sources,
-            self.settings.disturbance,
-            &self.u_prev,
-            &mut self.xi_last,
-        );
         self.kf.restart(self.xi_last.as_slice());
         self.u_sol.fill(0.0);
         for j in 0..self.cond.nc {

@@ -43,9 +43,8 @@ use super::condense::Augmented;
 use super::estimator::SteadyStateKalman;
 use super::qp::Bounds;
 use super::{
-    check_model, frame_sources, hover_disturbance, measurement_variances, process_noise,
-    push_frame, qp_backend, settings_for, solve_bounded, start_spread, with_start, Backend,
-    MpcSettings,
+    check_model, frame_sources, measurement_variances, process_noise, push_frame, qp_backend,
+    settings_for, solve_bounded, start_spread, with_start, Backend, MpcSettings,
 };
 use crate::config::{positive, ConfigError};
 use crate::control::layout::Measured;
@@ -624,16 +623,6 @@ impl SwingController for TrackingMpc {
         }
         self.xi.fill(0.0);
         self.xi.rows_mut(0, m + self.nm0).copy_from(&self.y);
-        hover_disturbance(
-            &self.kf,
-            m,
-            self.nz,
-            self.nm0,
-            &self.sources,
-            self.settings.disturbance,
-            &self.u_prev,
-            &mut self.xi,
-        );
         self.kf.restart(self.xi.as_slice());
         for j in 0..self.nc {
             for a in 0..m {
