@@ -225,7 +225,10 @@ def flown_estimator(data: Any) -> dict[str, Any] | None:
     the scale measured from it (:func:`imu_swing_scale`) where that is the smaller one, and
     then with the pendulum observer on the fitted cable (``length``, ``damping``:
     ``swing_core::sensors::pendulum``), which tells the swing from the drag a light
-    payload's small pull lets dominate the estimate.
+    payload's small pull lets dominate the estimate. At either scale, where the fit stands,
+    it loses the airframe's quadratic drag the fit measured (``drag_quadratic``;
+    ``swing_core::sysid::swing_scale::DragRemoval``): a linear model cannot hold the drag's
+    curvature, and the vehicle then creeps to its speed with the payload leaning.
 
     The MPC's swing weight was set for the cable's angle, and at a scale k̂ the estimate
     reads (k/k̂) of the angle plus (1 − k/k̂) of the vehicle's tilt. Where the payload is
@@ -252,6 +255,9 @@ def _flown(data: Any) -> tuple[dict[str, Any] | None, np.ndarray]:
     found = imu_swing_scale(data)
     if flies_measured_scale(found["diagnostics"]):
         return found["estimator"], found["swing"]
+    if found["diagnostics"]["fit"] is not None:
+        own = found["own_scale"]
+        return own["estimator"], own["swing"]
     cols = _columns(data)
     nan = np.full(len(cols["t"]), np.nan)
     raw = [np.asarray(cols.get(f"swing_est_{a}", nan), dtype=float) for a in "ne"]
@@ -272,9 +278,11 @@ def imu_swing_scale(data: Any) -> dict[str, Any]:
     settings, with the fitted pendulum for its observer, or the flight's own when the fit is
     refused), ``swing`` (N×2, the flight's estimate as the calibrated estimator would have
     made it, on the flight's own times: the swing angle, the drag told apart by the
-    observer) and ``diagnostics`` (``assumed_scale``, ``scale``, the ``fit`` or None and
-    the ``reason`` it was refused: the fit needs the flight's ``vn``, ``ve``, ``roll``,
-    ``pitch`` and ``yaw`` beside ``swing_est_*``)."""
+    observer and its quadratic term removed), ``own_scale`` (``estimator`` and ``swing``
+    at the flight's own scale, without the observer, the fitted quadratic drag removed;
+    the flight's own when refused) and ``diagnostics`` (``assumed_scale``, ``scale``, the
+    ``fit`` or None and the ``reason`` it was refused: the fit needs the flight's ``vn``,
+    ``ve``, ``roll``, ``pitch`` and ``yaw`` beside ``swing_est_*``)."""
     cols = _columns(data)
     names = ["vn", "ve", "swing_est_n", "swing_est_e", "roll", "pitch", "yaw"]
     # The columns' identities: a flight whose columns were replaced is fitted again.
@@ -299,6 +307,7 @@ def imu_swing_scale(data: Any) -> dict[str, Any]:
         found: dict[str, Any] = {"estimator": settings, "fit": None, "reason": reason}
         nan = np.full(len(cols["t"]), np.nan)
         swing = np.column_stack([np.asarray(cols.get(f"swing_est_{a}", nan), float) for a in "ne"])
+        own = {"estimator": settings, "swing": swing}
     else:
         src = {c: np.asarray(cols[c], dtype=float) for c in names}
         src["t"] = np.asarray(cols["t"], dtype=float)
@@ -313,11 +322,18 @@ def imu_swing_scale(data: Any) -> dict[str, Any]:
             dt,
             settings,
         )
-        est = found["estimate"]
-        swing = np.column_stack([np.interp(src["t"], grid["t"], est[:, i]) for i in range(2)])
+        on_times = lambda e: np.column_stack(  # noqa: E731
+            [np.interp(src["t"], grid["t"], e[:, i]) for i in range(2)]
+        )
+        swing = on_times(found["estimate"])
+        own = {
+            "estimator": dict(found["own_scale"]["estimator"]),
+            "swing": on_times(found["own_scale"]["estimate"]),
+        }
     out = {
         "estimator": dict(found["estimator"]),
         "swing": swing,
+        "own_scale": own,
         "diagnostics": {
             "assumed_scale": float(settings["scale"]),
             "scale": float(found["estimator"]["scale"]),
