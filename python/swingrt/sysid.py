@@ -307,7 +307,7 @@ def imu_swing_scale(data: Any) -> dict[str, Any]:
         found: dict[str, Any] = {"estimator": settings, "fit": None, "reason": reason}
         nan = np.full(len(cols["t"]), np.nan)
         swing = np.column_stack([np.asarray(cols.get(f"swing_est_{a}", nan), float) for a in "ne"])
-        own = {"estimator": settings, "swing": swing}
+        own: dict[str, Any] = {"estimator": settings, "swing": swing}
     else:
         src = {c: np.asarray(cols[c], dtype=float) for c in names}
         src["t"] = np.asarray(cols["t"], dtype=float)
@@ -330,6 +330,12 @@ def imu_swing_scale(data: Any) -> dict[str, Any]:
             "estimator": dict(found["own_scale"]["estimator"]),
             "swing": on_times(found["own_scale"]["estimate"]),
         }
+        if found["fit"] is not None and all(c in cols for c in IMU_COLUMNS):
+            # The fit's estimate is to first order; the drag it removes is large where the
+            # pull is small, so with the flight's IMU at hand the estimators make it as a
+            # flight on the model will (online and offline then agree).
+            swing = _remade(cols, found["estimator"])
+            own["swing"] = _remade(cols, own["estimator"])
     out = {
         "estimator": dict(found["estimator"]),
         "swing": swing,
@@ -483,23 +489,27 @@ def model_columns(model: LinearModel, data: Any) -> Mapping[str, Any]:
             f"{' with the pendulum observer' if want['length'] > 0 else ''}; the flight has "
             f"no column(s) {', '.join(missing)} to make it from"
         )
+    swing = _remade(cols, want)
+    return {**cols, "swing_n": swing[:, 0], "swing_e": swing[:, 1]}
+
+
+def _remade(cols: Mapping[str, Any], settings: Mapping[str, Any]) -> np.ndarray:
+    """The swing estimate (N×2, on the flight's own times) an estimator of ``settings``
+    makes from the flight's IMU (:data:`IMU_COLUMNS`, all present), run from its start as a
+    flight runs it."""
     src = {c: np.asarray(cols[c], dtype=float) for c in IMU_COLUMNS}
     src["t"] = np.asarray(cols["t"], dtype=float)
     src["yaw"] = np.unwrap(src["yaw"])
-    grid = resample(src, 1.0 / float(want["rate"]), names=IMU_COLUMNS)
+    grid = resample(src, 1.0 / float(settings["rate"]), names=IMU_COLUMNS)
     stack = lambda *c: np.ascontiguousarray(np.column_stack(c))  # noqa: E731
     swing = _core.estimate_swing(
         stack(grid["imu_ax"], grid["imu_ay"], grid["imu_az"]),
         stack(*euler_to_quat(grid["roll"], grid["pitch"], grid["yaw"])),
         stack(grid["vn"], grid["ve"], grid["vd"]),
-        want,
+        dict(settings),
     )
     t = src["t"]
-    return {
-        **cols,
-        "swing_n": np.interp(t, grid["t"], swing[:, 0]),
-        "swing_e": np.interp(t, grid["t"], swing[:, 1]),
-    }
+    return np.column_stack([np.interp(t, grid["t"], swing[:, i]) for i in range(2)])
 
 
 def _estimated_by(data: Any, settings: Mapping[str, Any]) -> bool:
