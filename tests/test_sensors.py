@@ -575,3 +575,11 @@ def test_without_the_drag_s_curvature_the_imu_mpc_ends_its_step_as_the_sensor_mp
     airframe = vehicle["drag"][0] * 0.5 * vehicle["air_density"] / vehicle["mass"]
     assert flown["drag_quadratic"][0] == pytest.approx(airframe, rel=0.5)
     assert flown["drag_linear"] == [0.0, 0.0]
+
+
+def test_the_scale_fit_names_a_drag_removal_it_does_not_know():
+    from swingrt.errors import ConfigError
+
+    z = np.zeros((700, 2))
+    with pytest.raises(ConfigError, match=r"drag: must be keep, quadratic or all \(got \"both\"\)"):
+        _core.swing_scale_fit(z, z, np.zeros((700, 3)), 0.01, None, drag="both")
