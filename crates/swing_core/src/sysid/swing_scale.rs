@@ -61,7 +61,7 @@ pub struct ScaleSettings {
 /// linear model holds its linear part, but not its curvature: on the default step the
 /// estimate reads 7.1° of drag at 2 m/s and 1.5° at 0.9 m/s, the identified model misreads
 /// the step's end, and the vehicle creeps to its speed with the payload leaning 0.8–1.0°
-/// 4 s after the step (0.35–0.56° with a swing sensor). The quadratic term, fitted in the
+/// 4 s after the step (0.39–0.56° with a swing sensor). The quadratic term, fitted in the
 /// ground speed v, is the airframe's own coefficient whatever the wind (where v and v − w
 /// keep their sign, c (v − w)² = c v² − 2cwv + cw²), so removing c v|v| leaves a drag
 /// linear in v that the model holds. The linear term is the wind's (−2cw) and is kept:
