@@ -461,7 +461,9 @@ def test_garbage_unknown_messages_and_wrong_system_do_not_crash(vehicle):
 
 def test_wrong_system_id_is_detected(vehicle):
     url, _ = vehicle
-    conn = connect(url)
+    # Up first (the vehicle's process may take seconds to start on a loaded machine), then
+    # asked for a system it is not.
+    conn = observer(url)
     with pytest.raises(LinkError, match="heartbeat from system 1 .* system 7 was expected"):
         wait_heartbeat(conn, timeout=2.5, system_id=7)
     conn.close()
