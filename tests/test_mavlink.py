@@ -733,11 +733,14 @@ def test_fly_without_a_swing_sensor_on_the_imu_that_sitl_streams(tmp_path):
     """Nothing on the cable: ``swingrt sitl`` streams HIGHRES_IMU (the simulator's IMU) and
     the true swing only as DEBUG_VECT "SWTRUE"; ``swingrt fly`` on a model identified on the
     IMU asks for HIGHRES_IMU, flies on the swing it estimates from it (the same estimate as
-    the simulator's own estimator on the same IMU), and logs the truth beside it; the true
-    swing stays well under PX4 PID's. (The estimate is not the truth in steady flight: the
-    airframe's drag reads as a lean, about 6° at 2 m/s here, which the model carries.)"""
+    the model's estimator makes from the simulator's IMU), and logs the truth beside it; the
+    true swing stays well under PX4 PID's. (The estimate is not the truth in steady flight:
+    the drag the model's estimator keeps reads as a lean of a few degrees, which the model
+    carries.)"""
+    from swingrt import _core
     from swingrt.io.flight import Trace
     from swingrt.sim import simulate
+    from swingrt.sysid import model_columns
 
     seen, imu = fly_sensor_chain(
         tmp_path,
@@ -752,10 +755,11 @@ def test_fly_without_a_swing_sensor_on_the_imu_that_sitl_streams(tmp_path):
     assert name.rstrip("\0") == "SWTRUE"
     node = Trace.from_parquet(tmp_path / "fly.parquet")
     physics = Trace.from_parquet(tmp_path / "physics.parquet")
-    # The node's estimate from HIGHRES_IMU against the simulator's estimator on its own IMU,
-    # lined up on the vehicle's clock.
+    # The node's estimate from HIGHRES_IMU against the model's estimator (its scale and the
+    # drag it removes) run on the simulator's own IMU, lined up on the vehicle's clock.
+    model = _core.LinearModel.load(tmp_path / "model.json")
     at = np.asarray(node["px4_time_s"])
-    sim_est = np.interp(at, physics.t, np.asarray(physics["swing_est_n"]))
+    sim_est = np.interp(at, physics.t, np.asarray(model_columns(model, physics)["swing_n"]))
     est, truth = np.asarray(node["swing_n"]), np.asarray(node["swing_true_n"])
     assert np.corrcoef(est, sim_est)[0, 1] > 0.95
     assert np.degrees(np.median(np.abs(est - sim_est))) < 0.5

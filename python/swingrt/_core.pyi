@@ -146,7 +146,7 @@ def swing_scale_fit(
     euler: npt.NDArray[np.float64],
     dt: float,
     settings: Mapping[str, Any] | None = None,
-    remove_drag: bool = False,
+    drag: str = "quadratic",
 ) -> dict[str, Any]: ...
 def body_swing(
     counts: npt.NDArray[np.float64],

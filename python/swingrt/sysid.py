@@ -225,7 +225,10 @@ def flown_estimator(data: Any) -> dict[str, Any] | None:
     the scale measured from it (:func:`imu_swing_scale`) where that is the smaller one, and
     then with the pendulum observer on the fitted cable (``length``, ``damping``:
     ``swing_core::sensors::pendulum``), which tells the swing from the drag a light
-    payload's small pull lets dominate the estimate.
+    payload's small pull lets dominate the estimate. At either scale, where the fit stands,
+    it loses the airframe's quadratic drag the fit measured (``drag_quadratic``;
+    ``swing_core::sysid::swing_scale::DragRemoval``): a linear model cannot hold the drag's
+    curvature, and the vehicle then creeps to its speed with the payload leaning.
 
     The MPC's swing weight was set for the cable's angle, and at a scale k̂ the estimate
     reads (k/k̂) of the angle plus (1 − k/k̂) of the vehicle's tilt. Where the payload is
@@ -252,6 +255,9 @@ def _flown(data: Any) -> tuple[dict[str, Any] | None, np.ndarray]:
     found = imu_swing_scale(data)
     if flies_measured_scale(found["diagnostics"]):
         return found["estimator"], found["swing"]
+    if found["diagnostics"]["fit"] is not None:
+        own = found["own_scale"]
+        return own["estimator"], own["swing"]
     cols = _columns(data)
     nan = np.full(len(cols["t"]), np.nan)
     raw = [np.asarray(cols.get(f"swing_est_{a}", nan), dtype=float) for a in "ne"]
@@ -272,9 +278,11 @@ def imu_swing_scale(data: Any) -> dict[str, Any]:
     settings, with the fitted pendulum for its observer, or the flight's own when the fit is
     refused), ``swing`` (N×2, the flight's estimate as the calibrated estimator would have
     made it, on the flight's own times: the swing angle, the drag told apart by the
-    observer) and ``diagnostics`` (``assumed_scale``, ``scale``, the ``fit`` or None and
-    the ``reason`` it was refused: the fit needs the flight's ``vn``, ``ve``, ``roll``,
-    ``pitch`` and ``yaw`` beside ``swing_est_*``)."""
+    observer and its quadratic term removed), ``own_scale`` (``estimator`` and ``swing``
+    at the flight's own scale, without the observer, the fitted quadratic drag removed;
+    the flight's own when refused) and ``diagnostics`` (``assumed_scale``, ``scale``, the
+    ``fit`` or None and the ``reason`` it was refused: the fit needs the flight's ``vn``,
+    ``ve``, ``roll``, ``pitch`` and ``yaw`` beside ``swing_est_*``)."""
     cols = _columns(data)
     names = ["vn", "ve", "swing_est_n", "swing_est_e", "roll", "pitch", "yaw"]
     # The columns' identities: a flight whose columns were replaced is fitted again.
@@ -299,6 +307,7 @@ def imu_swing_scale(data: Any) -> dict[str, Any]:
         found: dict[str, Any] = {"estimator": settings, "fit": None, "reason": reason}
         nan = np.full(len(cols["t"]), np.nan)
         swing = np.column_stack([np.asarray(cols.get(f"swing_est_{a}", nan), float) for a in "ne"])
+        own: dict[str, Any] = {"estimator": settings, "swing": swing}
     else:
         src = {c: np.asarray(cols[c], dtype=float) for c in names}
         src["t"] = np.asarray(cols["t"], dtype=float)
@@ -313,11 +322,24 @@ def imu_swing_scale(data: Any) -> dict[str, Any]:
             dt,
             settings,
         )
-        est = found["estimate"]
-        swing = np.column_stack([np.interp(src["t"], grid["t"], est[:, i]) for i in range(2)])
+        on_times = lambda e: np.column_stack(  # noqa: E731
+            [np.interp(src["t"], grid["t"], e[:, i]) for i in range(2)]
+        )
+        swing = on_times(found["estimate"])
+        own = {
+            "estimator": dict(found["own_scale"]["estimator"]),
+            "swing": on_times(found["own_scale"]["estimate"]),
+        }
+        if found["fit"] is not None and all(c in cols for c in IMU_COLUMNS):
+            # The fit's estimate is to first order; the drag it removes is large where the
+            # pull is small, so with the flight's IMU at hand the estimators make it as a
+            # flight on the model will (online and offline then agree).
+            swing = _remade(cols, found["estimator"])
+            own["swing"] = _remade(cols, own["estimator"])
     out = {
         "estimator": dict(found["estimator"]),
         "swing": swing,
+        "own_scale": own,
         "diagnostics": {
             "assumed_scale": float(settings["scale"]),
             "scale": float(found["estimator"]["scale"]),
@@ -467,23 +489,27 @@ def model_columns(model: LinearModel, data: Any) -> Mapping[str, Any]:
             f"{' with the pendulum observer' if want['length'] > 0 else ''}; the flight has "
             f"no column(s) {', '.join(missing)} to make it from"
         )
+    swing = _remade(cols, want)
+    return {**cols, "swing_n": swing[:, 0], "swing_e": swing[:, 1]}
+
+
+def _remade(cols: Mapping[str, Any], settings: Mapping[str, Any]) -> np.ndarray:
+    """The swing estimate (N×2, on the flight's own times) an estimator of ``settings``
+    makes from the flight's IMU (:data:`IMU_COLUMNS`, all present), run from its start as a
+    flight runs it."""
     src = {c: np.asarray(cols[c], dtype=float) for c in IMU_COLUMNS}
     src["t"] = np.asarray(cols["t"], dtype=float)
     src["yaw"] = np.unwrap(src["yaw"])
-    grid = resample(src, 1.0 / float(want["rate"]), names=IMU_COLUMNS)
+    grid = resample(src, 1.0 / float(settings["rate"]), names=IMU_COLUMNS)
     stack = lambda *c: np.ascontiguousarray(np.column_stack(c))  # noqa: E731
     swing = _core.estimate_swing(
         stack(grid["imu_ax"], grid["imu_ay"], grid["imu_az"]),
         stack(*euler_to_quat(grid["roll"], grid["pitch"], grid["yaw"])),
         stack(grid["vn"], grid["ve"], grid["vd"]),
-        want,
+        dict(settings),
     )
     t = src["t"]
-    return {
-        **cols,
-        "swing_n": np.interp(t, grid["t"], swing[:, 0]),
-        "swing_e": np.interp(t, grid["t"], swing[:, 1]),
-    }
+    return np.column_stack([np.interp(t, grid["t"], swing[:, i]) for i in range(2)])
 
 
 def _estimated_by(data: Any, settings: Mapping[str, Any]) -> bool:

@@ -9,7 +9,8 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use swing_core::plant::dynamics::rotation;
 use swing_core::sensors::{BodySensorParams, ImuSwingEstimator, ImuSwingSettings};
-use swing_core::sysid::swing_scale::{self, ScaleAxis, ScaleSettings};
+use swing_core::sysid::swing_scale::{self, DragRemoval, ScaleAxis, ScaleSettings};
+use swing_core::ConfigError;
 
 use crate::convert::{self, data_err};
 use crate::errors::to_py;
@@ -211,11 +212,13 @@ fn body_swing<'py>(
 /// fitted ratio, length, drag terms, explained share and residual) or None with `reason`
 /// saying why the fit is not to be used, `estimator` (the calibrated settings, or
 /// `settings` unchanged) and `estimate` (N×2: the swing the calibrated estimator would have
-/// made, to first order, through its pendulum observer, or `estimate` unchanged). The
-/// calibrated estimator's observer tells the swing from drag; its low-passed estimate keeps
-/// reading the airframe's drag as swing (scaled) unless `remove_drag`.
+/// made, to first order, through its pendulum observer, or `estimate` unchanged), and
+/// `own_scale` (`estimator` and `estimate` as `settings` make them at their own scale,
+/// without the drag the fit removes, or unchanged). Both lose the fitted drag terms `drag`
+/// names (`keep`, `quadratic`: the airframe's curvature, the default; `all`); the
+/// calibrated estimator's observer tells the rest of the drag from the swing.
 #[pyfunction]
-#[pyo3(signature = (vel, estimate, euler, dt, settings=None, remove_drag=false))]
+#[pyo3(signature = (vel, estimate, euler, dt, settings=None, drag="quadratic"))]
 fn swing_scale_fit<'py>(
     py: Python<'py>,
     vel: &Bound<'py, PyAny>,
@@ -223,9 +226,15 @@ fn swing_scale_fit<'py>(
     euler: &Bound<'py, PyAny>,
     dt: f64,
     settings: Option<&Bound<'py, PyAny>>,
-    remove_drag: bool,
+    drag: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
     let s: ImuSwingSettings = convert::settings(settings, "estimator")?;
+    let drag = DragRemoval::from_name(drag).ok_or_else(|| {
+        to_py(ConfigError::new(
+            "drag",
+            format!("must be keep, quadratic or all (got {drag:?})"),
+        ))
+    })?;
     s.validate().map_err(|e| to_py(e.within("estimator")))?;
     if !(dt.is_finite() && dt > 0.0) {
         return Err(data_err(format!(
@@ -266,9 +275,11 @@ fn swing_scale_fit<'py>(
     let out = PyDict::new(py);
     let mut corrected = numpy::ndarray::Array2::<f64>::zeros((rows, 2));
     let fit_settings = ScaleSettings {
-        remove_drag,
+        drag,
         ..ScaleSettings::default()
     };
+    let own = PyDict::new(py);
+    let mut own_estimate = numpy::ndarray::Array2::<f64>::zeros((rows, 2));
     match swing_scale::fit(&axes, dt, &fit_settings) {
         Ok(fit) => {
             let [cn, ce] = [fit.apply(&axes[0]), fit.apply(&axes[1])];
@@ -279,18 +290,31 @@ fn swing_scale_fit<'py>(
                 corrected[[i, 0]] = x[0];
                 corrected[[i, 1]] = x[1];
             }
+            for (j, axis) in axes.iter().enumerate() {
+                for (i, x) in fit.apply_without_drag(axis).into_iter().enumerate() {
+                    own_estimate[[i, j]] = x;
+                }
+            }
             out.set_item("fit", convert::to_py_object(py, &fit)?)?;
             out.set_item("reason", py.None())?;
             out.set_item("estimator", convert::to_py_object(py, &calibrated)?)?;
+            own.set_item(
+                "estimator",
+                convert::to_py_object(py, &fit.without_drag(&s))?,
+            )?;
         }
         Err(reason) => {
             corrected.assign(&est.as_array());
+            own_estimate.assign(&est.as_array());
+            own.set_item("estimator", convert::to_py_object(py, &s)?)?;
             out.set_item("fit", py.None())?;
             out.set_item("reason", reason.to_string())?;
             out.set_item("estimator", convert::to_py_object(py, &s)?)?;
         }
     }
     out.set_item("estimate", corrected.into_pyarray(py))?;
+    own.set_item("estimate", own_estimate.into_pyarray(py))?;
+    out.set_item("own_scale", own)?;
     Ok(out)
 }
 

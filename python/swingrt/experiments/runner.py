@@ -47,7 +47,8 @@ def swing_scale_note(scale: dict[str, Any]) -> str:
     """What the report says of a model identified on the IMU's swing estimate: the scale
     measured from the training flight against the one the estimator assumed, and which the
     model flies (:func:`swingrt.sysid.flown_estimator`: the smaller), or why the
-    measurement was refused (the assumed scale is flown then)."""
+    measurement was refused (the assumed scale is flown then), and the drag read as swing
+    it removes (``swing_core::sysid::swing_scale::DragRemoval``)."""
     fit = scale.get("fit")
     assumed = scale["assumed_scale"]
     if fit is None:
@@ -60,6 +61,20 @@ def swing_scale_note(scale: dict[str, Any]) -> str:
         f"swing from the IMU at the {flown} scale: measured from the training flight "
         f"{scale['scale']:.3f} m/s² (g·m_p/m_Q, a pendulum of {fit['length']:.2f} m "
         f"explaining {100 * fit['explained']:.0f} % of the estimate), assumed {assumed:.3f} m/s²"
+        + _drag_note(fit)
+    )
+
+
+def _drag_note(fit: dict[str, Any]) -> str:
+    """The fit's drag terms the estimate flown loses, as the note says them."""
+    removed = fit.get("drag_removed", "keep")
+    if removed == "keep":
+        return "; the drag it reads as swing is kept"
+    terms = {"quadratic": "its quadratic drag", "all": "its drag"}[removed]
+    return (
+        f"; {terms} removed ({fit['drag_quadratic']:.4f} rad per (m/s)²"
+        + (f", {fit['drag_linear']:.4f} rad per m/s" if removed == "all" else "")
+        + ")"
     )
 
 
