@@ -509,11 +509,12 @@ def test_a_pick_whose_command_cycles_an_unseen_lower_link_is_flown_smoother(tmp_
     # swing from the IMU. The white-box fits one 0.72 m pendulum (the pair's common mode)
     # and the swing's spectrum keeps only a trace of the lower mode (a peak near 11.8 rad/s,
     # far below the shaper's bar). The pick passes on the one-pendulum twin; on the vehicle
-    # its command drives the lower mode into a cycle and the velocity never settles. Flown
-    # on the heaviest double pendulum of the two rates, it misses; the smoother design
-    # settles there, passes every flight again, and settles on the vehicle. The
-    # independent reference is the sample's own evaluation flight (the true double
-    # pendulum, its wind and gust), judged by the campaign's failure rule.
+    # its command drives the lower mode into a cycle that the payload still swings 7° in
+    # (the velocity settling or not) and it fails. Flown on the heaviest double pendulum of
+    # the two rates, it misses; the smoother design settles there, passes every flight
+    # again, and settles on the vehicle. The independent reference is the sample's own
+    # evaluation flight (the true double pendulum, its wind and gust), judged by the
+    # campaign's failure rule.
     import copy
     import json
     import tomllib
@@ -542,7 +543,8 @@ def test_a_pick_whose_command_cycles_an_unseen_lower_link_is_flown_smoother(tmp_
     model, mpc = flown["off"]
     assert model["control_check"]["spillover"] is None
     assert "acc_rate_weight" not in model and mpc["spillover"] is None
-    assert mpc["failure"] == "v_not_settled", mpc
+    assert mpc["failure"] in ("v_not_settled", "swing"), mpc
+    assert mpc["residual_swing_deg"] > 3.0, mpc
 
 
 def test_without_the_drag_s_curvature_the_imu_mpc_ends_its_step_as_the_sensor_mpc_does(tmp_path):
