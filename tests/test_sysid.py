@@ -992,7 +992,7 @@ def test_where_no_mpc_passes_on_the_imu_the_input_shaper_that_passes_on_the_twin
     twin's flights; the selection records it and the model's flight flies it, well within
     the bound and on the setpoint. The flight is the study's own vehicle and payload, not
     the twin: the shaper was judged on an estimate. (With the quadratic drag removed, the
-    default, one MPC here passes at 0.95 of the payload bound and flies 0.40 of PX4's
+    default, one MPC here passes at 0.95 of the payload bound and flies 0.396 of PX4's
     excess against this shaper's 0.25.)"""
     import functools
 
