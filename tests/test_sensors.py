@@ -390,6 +390,28 @@ def test_the_pendulum_observer_reads_drag_as_drag_online_as_offline():
     )
 
 
+def test_the_scale_fit_is_made_once_per_flight_whatever_object_carries_it(monkeypatch):
+    # The selection reads the same flight's fit through copies of it (each fit takes
+    # seconds); a copy is not fitted again, a changed column or estimator is, and what is
+    # shared cannot be written into.
+    from swingrt.io.flight import Trace
+    from swingrt.sysid import imu_swing_scale
+
+    flight = swingrt.collect({"sensors": {"swing": "imu"}}, duration=60.0, seed=5)
+    fit, calls = _core.swing_scale_fit, []
+    monkeypatch.setattr(_core, "swing_scale_fit", lambda *a, **k: calls.append(1) or fit(*a, **k))
+    first = imu_swing_scale(flight)
+    copy = Trace({k: v.copy() for k, v in flight.columns.items()}, flight.meta)
+    assert imu_swing_scale(copy) is first and len(calls) == 1
+    with pytest.raises(ValueError, match="read-only"):
+        first["swing"][0, 0] = 0.0
+    copy["swing_est_n"] = copy["swing_est_n"] + 1e-3
+    moved = imu_swing_scale(copy)
+    assert len(calls) == 2 and not np.array_equal(moved["swing"], first["swing"])
+    other = Trace(flight.columns, {**flight.meta, "swing_estimator": {"scale": 3.0}})
+    assert imu_swing_scale(other)["diagnostics"]["assumed_scale"] == 3.0 and len(calls) == 3
+
+
 def test_a_model_on_the_imu_is_scored_on_a_held_out_flight_through_its_own_estimator():
     # A model identified on a light payload's IMU estimate (the measured scale, the
     # pendulum observer) outputs that estimate. A held-out flight of the same vehicle made

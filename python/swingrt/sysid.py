@@ -27,8 +27,10 @@ where its swing came from in ``diagnostics['swing_source']``.
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
-import weakref
+from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -264,10 +266,25 @@ def _flown(data: Any) -> tuple[dict[str, Any] | None, np.ndarray]:
     return swing_estimator(data), np.column_stack(raw)
 
 
-#: What :func:`imu_swing_scale` found for a flight object (forgotten with it).
-_SCALES: weakref.WeakKeyDictionary[Any, tuple[tuple[int, ...], dict[str, Any]]] = (
-    weakref.WeakKeyDictionary()
-)
+#: What :func:`imu_swing_scale` found lately, by the digest of what it read: the selection
+#: asks again for the same flight through copies of it (the twin's, the candidates'), and
+#: each fit takes seconds.
+_SCALES: OrderedDict[bytes, dict[str, Any]] = OrderedDict()
+
+#: How many fits :data:`_SCALES` keeps (each holds two N×2 estimates).
+_SCALES_KEPT = 8
+
+
+def _scale_key(cols: Mapping[str, Any], given: Mapping[str, Any]) -> bytes:
+    """A digest of everything :func:`imu_swing_scale` reads from a flight: its columns
+    (those the remake reads too) and the estimator's settings."""
+    h = hashlib.blake2b(digest_size=20)
+    h.update(json.dumps(given, sort_keys=True, default=repr).encode())
+    for c in ("t", "swing_est_n", "swing_est_e", *IMU_COLUMNS):
+        if c in cols:
+            h.update(c.encode())
+            h.update(np.ascontiguousarray(cols[c], dtype=float).tobytes())
+    return h.digest()
 
 
 def imu_swing_scale(data: Any) -> dict[str, Any]:
@@ -285,15 +302,11 @@ def imu_swing_scale(data: Any) -> dict[str, Any]:
     ``ve``, ``roll``, ``pitch`` and ``yaw`` beside ``swing_est_*``)."""
     cols = _columns(data)
     names = ["vn", "ve", "swing_est_n", "swing_est_e", "roll", "pitch", "yaw"]
-    # The columns' identities: a flight whose columns were replaced is fitted again.
-    key = tuple(id(cols.get(c)) for c in ("t", *names))
-    try:
-        seen, kept = _SCALES[data]
-        if seen == key:
-            return kept
-    except (KeyError, TypeError):
-        pass
     given = swing_estimator(data) or {}
+    key = _scale_key(cols, given)
+    if key in _SCALES:
+        _SCALES.move_to_end(key)
+        return _SCALES[key]
     settings = dict(_core.ImuSwingEstimator(given or None).settings)
     missing = [c for c in names if c not in cols]
     reason = f"the flight has no column(s) {', '.join(missing)}" if missing else None
@@ -347,10 +360,12 @@ def imu_swing_scale(data: Any) -> dict[str, Any]:
             "reason": found["reason"],
         },
     }
-    try:
-        _SCALES[data] = (key, out)
-    except TypeError:  # a plain dict cannot be remembered; it is fitted again
-        pass
+    # Shared by every caller that reads the same flight: no one may write into it.
+    for arr in (out["swing"], own["swing"]):
+        arr.setflags(write=False)
+    _SCALES[key] = out
+    while len(_SCALES) > _SCALES_KEPT:
+        _SCALES.popitem(last=False)
     return out
 
 
