@@ -30,6 +30,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import threading
 from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -274,6 +275,9 @@ _SCALES: OrderedDict[bytes, dict[str, Any]] = OrderedDict()
 #: How many fits :data:`_SCALES` keeps (each holds two N×2 estimates).
 _SCALES_KEPT = 8
 
+#: Guards :data:`_SCALES` where a scheduler's worker runs tasks on several threads.
+_SCALES_LOCK = threading.Lock()
+
 
 def _scale_key(cols: Mapping[str, Any], given: Mapping[str, Any]) -> bytes:
     """A digest of everything :func:`imu_swing_scale` reads from a flight: its columns
@@ -304,9 +308,10 @@ def imu_swing_scale(data: Any) -> dict[str, Any]:
     names = ["vn", "ve", "swing_est_n", "swing_est_e", "roll", "pitch", "yaw"]
     given = swing_estimator(data) or {}
     key = _scale_key(cols, given)
-    if key in _SCALES:
-        _SCALES.move_to_end(key)
-        return _SCALES[key]
+    with _SCALES_LOCK:
+        if key in _SCALES:
+            _SCALES.move_to_end(key)
+            return _SCALES[key]
     settings = dict(_core.ImuSwingEstimator(given or None).settings)
     missing = [c for c in names if c not in cols]
     reason = f"the flight has no column(s) {', '.join(missing)}" if missing else None
@@ -361,11 +366,12 @@ def imu_swing_scale(data: Any) -> dict[str, Any]:
         },
     }
     # Shared by every caller that reads the same flight: no one may write into it.
-    for arr in (out["swing"], own["swing"]):
+    for arr in (swing, own["swing"]):
         arr.setflags(write=False)
-    _SCALES[key] = out
-    while len(_SCALES) > _SCALES_KEPT:
-        _SCALES.popitem(last=False)
+    with _SCALES_LOCK:
+        _SCALES[key] = out
+        while len(_SCALES) > _SCALES_KEPT:
+            _SCALES.popitem(last=False)
     return out
 
 
