@@ -599,6 +599,48 @@ def test_without_the_drag_s_curvature_the_imu_mpc_ends_its_step_as_the_sensor_mp
     airframe = vehicle["drag"][0] * 0.5 * vehicle["air_density"] / vehicle["mass"]
     assert flown["drag_quadratic"][0] == pytest.approx(airframe, rel=0.5)
     assert flown["drag_linear"] == [0.0, 0.0]
+    # The selection weighed keeping the drag too (SelectionSettings::swing_drags); in still
+    # air the twin judged the removal's pick the better (README: keeping it leans 0.8-1°).
+    choice = model.diagnostics["swing_drag_choice"]
+    weighed = {w["drag"]: w for w in choice["weighed"]}
+    assert set(weighed) == {"quadratic", "keep"} and choice["chosen"] == "quadratic", choice
+    assert all(w["pick_kind"] == "within_bounds" for w in weighed.values()), choice
+    assert weighed["quadratic"]["twin_swing_vs_pid"] <= weighed["keep"]["twin_swing_vs_pid"]
+    assert (weighed["quadratic"]["q"], weighed["quadratic"]["p"]) == (model.delays, model.rank)
+    assert "weighed by the selection: quadratic (q = " in (tmp_path / "metrics.md").read_text()
+
+
+def test_a_flight_read_with_a_drag_removal_of_its_own_is_identified_and_flown_with_it():
+    # The selection weighs the drag removals on one flight (with_swing_drag): the scale
+    # fit is the same, only what the estimate flown loses differs, and a model identified
+    # on a view carries that view's estimator, which its flights then run.
+    from swingrt.errors import ConfigError
+    from swingrt.sysid import (
+        flown_estimator,
+        identify,
+        imu_swing_scale,
+        model_estimator,
+        swing_drag,
+        with_swing_drag,
+    )
+
+    flight = swingrt.collect({"sensors": {"swing": "imu"}}, duration=300.0, seed=1)
+    keep = with_swing_drag(flight, "keep")
+    assert swing_drag(flight) is None and swing_drag(keep) == "keep"
+    assert keep.columns["vn"] is flight.columns["vn"]  # a view, not a copy
+    own, kept = imu_swing_scale(flight)["diagnostics"], imu_swing_scale(keep)["diagnostics"]
+    assert own["fit"]["drag_removed"] == "quadratic" and kept["fit"]["drag_removed"] == "keep"
+    assert kept["fit"]["drag_quadratic"] == own["fit"]["drag_quadratic"] != 0.0
+    assert kept["scale"] == own["scale"]
+    as_flown = _core.ImuSwingEstimator(flight.meta["scenario"]["sensors"].get("estimator"))
+    assert flown_estimator(keep)["drag_quadratic"] == as_flown.settings["drag_quadratic"]
+    assert flown_estimator(flight)["drag_quadratic"] != as_flown.settings["drag_quadratic"]
+    model = identify(keep, delays=10, rank=12)
+    as_core = lambda e: dict(_core.ImuSwingEstimator(e).settings)  # noqa: E731
+    assert as_core(model_estimator(model)) == as_core(flown_estimator(keep))
+    assert model.diagnostics["swing_scale"]["fit"]["drag_removed"] == "keep"
+    with pytest.raises(ConfigError, match="drag: must be keep, quadratic or all"):
+        imu_swing_scale(with_swing_drag(flight, "both"))
 
 
 def test_the_scale_fit_names_a_drag_removal_it_does_not_know():

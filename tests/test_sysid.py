@@ -671,9 +671,14 @@ def _grid_case(case):
 
 
 def _chosen(model: sysid.LinearModel) -> dict:
-    """The control check's record of the candidate ``model`` is (its q and p)."""
+    """The control check's record of the candidate ``model`` is: the one it names as flown,
+    which is the model's own (q, p) where its MPC flies."""
     cc = model.diagnostics["control_check"]
-    return next(c for c in cc["checked"] if (c["delays"], c["rank"]) == (model.delays, model.rank))
+    flown = cc["checked"][cc["flown"]]
+    if flown["law"] == "mpc":
+        assert (flown["delays"], flown["rank"]) == (model.delays, model.rank), flown
+    assert (cc["pick_kind"] == "within_bounds") == cc["passed"], cc["pick_kind"]
+    return flown
 
 
 def test_select_for_control_rejects_the_nmae_best_model_that_cannot_fly():
@@ -713,6 +718,11 @@ def test_select_for_control_bounds():
         sysid.select_for_control(train, result, bounds={"settling": 1.0})
     with pytest.raises(ConfigError, match="candidates"):
         sysid.select_for_control(train, result, candidates=0)
+    for drags in ([], ["keep", "keep"]):
+        with pytest.raises(ConfigError, match="swing_drags: must name one or more distinct"):
+            sysid.select_for_control(train, result, swing_drags=drags)
+    with pytest.raises(ConfigError, match="swing_drags"):
+        sysid.select_for_control(train, result, swing_drags=["both"])
     # Bounds nothing can meet: the least-violating candidate, and the diagnostics say so.
     none = sysid.select_for_control(
         train, result, candidates=3, bounds={"hold_drift": -1.0}, twin=None

@@ -33,13 +33,14 @@ import math
 import threading
 from collections import OrderedDict
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from swingrt import _core
 from swingrt.errors import ConfigError, DataError, IdentificationError, ModelError
+from swingrt.io.flight import Trace
 from swingrt.io.ulog import euler_to_quat
 from swingrt.scenario import scaled_inertia
 
@@ -56,6 +57,8 @@ __all__ = [
     "identify_settings",
     "imu_swing_scale",
     "flown_estimator",
+    "swing_drag",
+    "with_swing_drag",
     "flies_measured_scale",
     "body_sensor",
     "model_body_sensor",
@@ -86,6 +89,10 @@ PLAN_KEYS = ("search", "twin")
 #: vehicle weighed at the flight's vehicle mass and flown under its PX4 gains (what a log
 #: gives; its airframe is not the plant's), ``"off"`` no twin.
 TWINS = ("exact", "builtin", "off")
+
+#: The key of a trace's ``meta`` naming the drag its IMU swing estimate is read with
+#: (:func:`with_swing_drag`).
+SWING_DRAG_META = "swing_drag"
 
 #: State and input columns per axis choice.
 AXES: dict[str, tuple[list[str], list[str]]] = {
@@ -279,11 +286,11 @@ _SCALES_KEPT = 8
 _SCALES_LOCK = threading.Lock()
 
 
-def _scale_key(cols: Mapping[str, Any], given: Mapping[str, Any]) -> bytes:
+def _scale_key(cols: Mapping[str, Any], given: Mapping[str, Any], drag: str | None) -> bytes:
     """A digest of everything :func:`imu_swing_scale` reads from a flight: its columns
-    (those the remake reads too) and the estimator's settings."""
+    (those the remake reads too), the estimator's settings and the drag it removes."""
     h = hashlib.blake2b(digest_size=20)
-    h.update(json.dumps(given, sort_keys=True, default=repr).encode())
+    h.update(json.dumps([given, drag], sort_keys=True, default=repr).encode())
     for c in ("t", "swing_est_n", "swing_est_e", *IMU_COLUMNS):
         if c in cols:
             h.update(c.encode())
@@ -307,7 +314,8 @@ def imu_swing_scale(data: Any) -> dict[str, Any]:
     cols = _columns(data)
     names = ["vn", "ve", "swing_est_n", "swing_est_e", "roll", "pitch", "yaw"]
     given = swing_estimator(data) or {}
-    key = _scale_key(cols, given)
+    drag = swing_drag(data)
+    key = _scale_key(cols, given, drag)
     with _SCALES_LOCK:
         if key in _SCALES:
             _SCALES.move_to_end(key)
@@ -339,6 +347,7 @@ def imu_swing_scale(data: Any) -> dict[str, Any]:
             stack("roll", "pitch", "yaw"),
             dt,
             settings,
+            **({} if drag is None else {"drag": drag}),
         )
         on_times = lambda e: np.column_stack(  # noqa: E731
             [np.interp(src["t"], grid["t"], e[:, i]) for i in range(2)]
@@ -373,6 +382,24 @@ def imu_swing_scale(data: Any) -> dict[str, Any]:
         while len(_SCALES) > _SCALES_KEPT:
             _SCALES.popitem(last=False)
     return out
+
+
+def swing_drag(data: Any) -> str | None:
+    """The drag removal a flight's IMU swing estimate is read with, where it was given one
+    (:func:`with_swing_drag`), else None (the scale fit's default, ``ScaleSettings::drag``)."""
+    meta = getattr(data, "meta", None) or {}
+    drag = meta.get(SWING_DRAG_META)
+    return None if drag is None else str(drag)
+
+
+def with_swing_drag(data: Any, drag: str) -> Trace:
+    """``data`` read with its IMU swing estimate losing ``drag`` of the drag the scale fit
+    measures (``keep``, ``quadratic`` or ``all``: ``swing_core::sysid::swing_scale::
+    DragRemoval``; an unknown name is refused by the fit): a trace sharing its columns,
+    whose identification, selection and model (:func:`flown_estimator`) remove that."""
+    meta = dict(getattr(data, "meta", None) or {})
+    meta[SWING_DRAG_META] = drag
+    return Trace(_columns(data), meta, source=getattr(data, "source", ""))
 
 
 def swing_estimator(data: Any) -> dict[str, Any] | None:
@@ -731,6 +758,7 @@ def select_for_control(
     wander_sigmas: float | None = None,
     spillover: Mapping[str, float] | None = None,
     fallback: str | None = None,
+    swing_drags: Sequence[str] | None = None,
     check: tuple[LinearModel, str] | None = None,
     **settings: Any,
 ) -> SearchResult:
@@ -824,12 +852,16 @@ def select_for_control(
     wander on each checked loop. Without a white-box (a model-only check) the twin is not
     flown. A flight identified on the IMU's swing estimate (:func:`swing_source`) flies the
     twin on the same estimate (its ``sensors`` set to the flight's swing source and
-    estimator). ``check`` is :func:`check_plant`'s answer when the caller already has it
-    (it is built from the same flight and settings otherwise)."""
+    estimator). Such a flight, where its scale fit stands, is searched and selected once
+    for each drag removal of ``swing_drags`` (``SelectionSettings::swing_drags``, default
+    ``quadratic`` then ``keep``: :func:`with_swing_drag`), and the selection whose pick the
+    twin judges best is returned (within every bound first, then the least swing on the
+    twin's step over PX4's there; ties to the earlier), with what each weighed in
+    ``diagnostics['swing_drag_choice']``. ``check`` is :func:`check_plant`'s answer when the
+    caller already has it (it is built from the same flight and settings otherwise)."""
     if result.search is None:
         raise ConfigError("result: not from a search (no candidates to check)", field="result")
     s = identify_settings(**{**result.settings, **settings})
-    plant, label = check or check_plant(data, result, axes=axes, settings=s)
     # Unset selection settings take the core's defaults (``SelectionSettings``): one home.
     given = {
         "candidates": candidates,
@@ -853,12 +885,88 @@ def select_for_control(
         "wander_sigmas": wander_sigmas,
         "spillover": None if spillover is None else dict(spillover),
         "fallback": fallback,
+        "swing_drags": None if swing_drags is None else list(swing_drags),
     }
-    selection = {k: v for k, v in given.items() if v is not None} | {"plant_label": label}
+    selection = {k: v for k, v in given.items() if v is not None}
+    drags = _core.check_settings("selection", selection)["swing_drags"]
     if isinstance(twin, str):
         if twin != "builtin":
             raise ConfigError(f"twin: a Scenario, 'builtin' or None, not {twin!r}", field="twin")
         twin = builtin_twin(s["vehicle_mass"])
+    runs = []
+    for drag, view in _drag_views(data, drags):
+        found = result if view is data else search(view, axes=axes, **result.settings)
+        plant = check if view is data else None
+        runs.append((drag, _select(view, found, axes, s, mpc_settings, selection, twin, plant)))
+    if len(runs) == 1:
+        return runs[0][1]
+    weighed = [{"drag": drag, **_pick_outcome(r.model)} for drag, r in runs]
+    best = min(range(len(runs)), key=lambda i: (_pick_rank(weighed[i]), i))
+    chosen = runs[best][1]
+    record = {"chosen": runs[best][0], "weighed": weighed}
+    return replace(chosen, model=chosen.model.with_diagnostics({"swing_drag_choice": record}))
+
+
+def _drag_views(data: Any, drags: Sequence[str]) -> list[tuple[str | None, Any]]:
+    """The flight as the selection reads it with each removal of ``drags``
+    (``SelectionSettings::swing_drags``), the flight itself for the one its scale fit made;
+    the flight alone (drag None) when its swing is not the IMU's estimate, its scale fit is
+    refused (nothing measured to remove) or it is read with a removal of its own."""
+    if swing_source(data) != "imu" or swing_drag(data) is not None:
+        return [(None, data)]
+    fit = imu_swing_scale(data)["diagnostics"]["fit"]
+    if fit is None:
+        return [(None, data)]
+    own = fit["drag_removed"]
+    return [(d, data if d == own else with_swing_drag(data, d)) for d in drags]
+
+
+#: :func:`select_for_control`'s picks in order of preference, as the core's ``choose``
+#: ranks candidates (``control_check['pick_kind']``).
+_PICK_KINDS = ("within_bounds", "least_swing", "least_miss")
+
+
+def _pick_outcome(model: LinearModel) -> dict[str, Any]:
+    """What the twin said of a selection's pick: how it was picked, the law it flies, its
+    (q, p), its swing excess on the twin's step over PX4's there (None without a twin) and
+    the twin step's figures (``twin``: settle time, overshoot, final error, swing excess)."""
+    cc = model.diagnostics.get("control_check") or {}
+    flown = cc.get("checked", [])[cc["flown"]] if "flown" in cc else {}
+    twin, pid = flown.get("twin") or {}, ((cc.get("twin") or {}).get("pid") or {})
+    swing, ref = twin.get("swing_excess"), pid.get("swing_excess")
+    return {
+        "pick_kind": cc.get("pick_kind"),
+        "law": (cc.get("law") or {}).get("kind", "mpc"),
+        "q": int(model.delays),
+        "p": int(model.rank),
+        "twin_swing_vs_pid": None if swing is None or not ref else float(swing) / float(ref),
+        "twin": flown.get("twin"),
+    }
+
+
+def _pick_rank(outcome: Mapping[str, Any]) -> tuple[int, float]:
+    """The order :func:`select_for_control` weighs selections in, the core's rule for
+    candidates (``design::selection::choose``): within every bound first, then the least
+    swing on the twin relative to PX4's there."""
+    kind = outcome["pick_kind"]
+    order = _PICK_KINDS.index(kind) if kind in _PICK_KINDS else len(_PICK_KINDS)
+    swing = outcome["twin_swing_vs_pid"]
+    return order, math.inf if swing is None else swing
+
+
+def _select(
+    data: Any,
+    result: SearchResult,
+    axes: str,
+    s: Mapping[str, Any],
+    mpc_settings: Mapping[str, Any] | None,
+    selection: Mapping[str, Any],
+    twin: _core.Scenario | None,
+    check: tuple[LinearModel, str] | None,
+) -> SearchResult:
+    """One control-relevant selection of :func:`select_for_control` on ``data`` as read."""
+    plant, label = check or check_plant(data, result, axes=axes, settings=s)
+    selection = {**selection, "plant_label": label}
     if plant.method != "whitebox":
         twin = None
     if twin is not None and swing_source(data) == "imu":
@@ -889,7 +997,7 @@ def select_for_control(
                 }
             }
         )
-    return SearchResult(model=model, table=result.table, search=result.search, settings=s)
+    return SearchResult(model=model, table=result.table, search=result.search, settings=dict(s))
 
 
 #: The fields of a scenario's ``controller`` table that are PX4's cascade gains (velocity,

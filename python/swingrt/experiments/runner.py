@@ -65,6 +65,20 @@ def swing_scale_note(scale: dict[str, Any]) -> str:
     )
 
 
+def swing_drag_note(choice: dict[str, Any]) -> str:
+    """What the report says of the drag removals the selection weighed on the IMU's swing
+    (``diagnostics['swing_drag_choice']``, :func:`swingrt.sysid.select_for_control`): each
+    one's pick and its swing on the twin's step against PX4's, and which flies."""
+
+    def one(w: dict[str, Any]) -> str:
+        swing = w["twin_swing_vs_pid"]
+        on_twin = "no twin" if swing is None else f"{swing:.3f}× PX4's swing on the twin"
+        return f"{w['drag']} (q = {w['q']}, p = {w['p']}, {w['law']}, {on_twin})"
+
+    weighed = "; ".join(one(w) for w in choice["weighed"])
+    return f"drag removal weighed by the selection: {weighed}; flown: {choice['chosen']}"
+
+
 def _drag_note(fit: dict[str, Any]) -> str:
     """The fit's drag terms the estimate flown loses, as the note says them."""
     removed = fit.get("drag_removed", "keep")
@@ -177,6 +191,9 @@ def run_experiment(
         scale = model.diagnostics.get("swing_scale")
         if scale is not None:
             notes.append(f"{case}: {swing_scale_note(scale)}")
+        choice = model.diagnostics.get("swing_drag_choice")
+        if choice is not None:
+            notes.append(f"{case}: {swing_drag_note(choice)}")
         plot_case(out / f"{case}.png", case, traces, exp.axes)
         if prediction is not None and "mpc" in traces:
             plot_prediction(out / f"{case}__prediction.png", prediction, traces["mpc"], model)

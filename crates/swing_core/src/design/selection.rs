@@ -61,6 +61,7 @@ use crate::design::twin::{TwinFlight, TwinGust, TwinHold, TwinPlant, TWIN_GUST, 
 use crate::sysid::pipeline::{self, candidate_row};
 use crate::sysid::search::{Candidate, SearchResult};
 use crate::sysid::stability::Verdict as ScreenVerdict;
+use crate::sysid::swing_scale::DragRemoval;
 use crate::sysid::{IdentifySettings, LinearModel, Trajectory};
 
 /// Bounds of the closed-loop check, as fractions of the step.
@@ -407,6 +408,20 @@ pub struct SelectionSettings {
     /// the 197 single payloads. On seed 3's ten MPC failures ZVD flew all ten within the
     /// bounds, ZV failed one (a double pendulum at 0.52× PX4's swing).
     pub fallback: Fallback,
+    /// The drag a swing estimated from the IMU loses, as a design variable
+    /// (`sysid::swing_scale::DragRemoval`): the flight is identified and selected with each
+    /// removal in turn, and the one whose pick the twin judges best flies (the same rule as
+    /// [`choose`]: within every bound first, then the least twin swing excess relative to
+    /// PX4's on the twin; ties to the earlier). Read by the orchestration that runs the
+    /// selections (Python's `sysid.select_for_control`); a flight whose scale fit is
+    /// refused, or that is read with a removal of its own, is selected once.
+    ///
+    /// Why a choice and not a setting: on the default step in still air the estimate's
+    /// quadratic drag (7.1° at 2 m/s) must go, or the vehicle creeps to its speed with the
+    /// payload leaning 0.8–1.0° 4 s after the step; in a headwind along the training
+    /// flight's steps, where that flight cannot tell the wind, removing it failed 8 of
+    /// `robustness-imu` seed 9's 95 such samples against 3 keeping it.
+    pub swing_drags: Vec<DragRemoval>,
 }
 
 /// The law [`select_for_control`] flies where no candidate's MPC passes (`design::law`).
@@ -573,6 +588,7 @@ impl Default for SelectionSettings {
             spillover: Spillover::default(),
             plant_label: "whitebox".into(),
             fallback: Fallback::Zvd,
+            swing_drags: vec![DragRemoval::Quadratic, DragRemoval::Keep],
         }
     }
 }
@@ -647,6 +663,13 @@ impl SelectionSettings {
             "twin_bounds.swing_excess_min",
             self.twin_bounds.swing_excess_min,
         )?;
+        let drags = &self.swing_drags;
+        if drags.is_empty() || (1..drags.len()).any(|i| drags[..i].contains(&drags[i])) {
+            return Err(ConfigError::new(
+                "swing_drags",
+                "must name one or more distinct removals (keep, quadratic, all)",
+            ));
+        }
         Ok(())
     }
 }
@@ -979,6 +1002,17 @@ pub enum Pick {
     /// None settled: the candidate with the least miss, the twin's (its swing bound
     /// included) before the linear one.
     LeastMiss,
+}
+
+impl Pick {
+    /// The name the diagnostics' `pick_kind` uses, in [`choose`]'s order of preference.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::WithinBounds => "within_bounds",
+            Self::LeastSwing => "least_swing",
+            Self::LeastMiss => "least_miss",
+        }
+    }
 }
 
 impl std::fmt::Display for Pick {
@@ -1393,6 +1427,7 @@ pub fn select_for_control(
     // its diagnostics and for a controller that designs its own MPC on it.
     let mut law = Law::Mpc;
     let mut pick = mpc_pick;
+    let mut flown = pick_index;
     let fallback_law = match (twin, settings.fallback.shaper()) {
         (Some(tw), Some(shaper)) if !mpc_passed => {
             Law::whitebox_shaper(plant, tw.px4(), &shaper)?.map(|law| (law, tw.axes()))
@@ -1415,6 +1450,7 @@ pub fn select_for_control(
         if i == checked.len() - 1 {
             law = fallback;
             pick = p;
+            flown = i;
         }
     }
     let passed = pick == Pick::WithinBounds;
@@ -1545,6 +1581,8 @@ pub fn select_for_control(
             "passers": settings.passers,
             "look_ahead": settings.look_ahead,
             "pick": pick.to_string(),
+            "pick_kind": pick.name(),
+            "flown": flown,
             "screened_out": screened_out,
             "strongest_filter_pass": second_pass.map(|(noise, flown)| json!({
                 "swing_measurement_noise": noise,
@@ -2668,6 +2706,26 @@ mod tests {
                 assert!(err.contains(field), "{err}");
             }
         }
+    }
+
+    #[test]
+    fn the_swing_drags_weighed_are_one_or_more_distinct_removals() {
+        use DragRemoval::{All, Keep, Quadratic};
+        let s = SelectionSettings::default();
+        assert_eq!(s.swing_drags, vec![Quadratic, Keep]);
+        for bad in [vec![], vec![Keep, Keep], vec![Quadratic, All, Quadratic]] {
+            let s = SelectionSettings {
+                swing_drags: bad.clone(),
+                ..SelectionSettings::default()
+            };
+            let err = s.validate().unwrap_err().to_string();
+            assert!(err.contains("swing_drags"), "{bad:?}: {err}");
+        }
+        let one = SelectionSettings {
+            swing_drags: vec![All],
+            ..SelectionSettings::default()
+        };
+        assert!(one.validate().is_ok());
     }
 
     #[test]
