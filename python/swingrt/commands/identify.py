@@ -107,6 +107,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
 def run(args) -> int:
     """Run the subcommand."""
     from swingrt import sysid
+    from swingrt.experiments.notes import swing_drag_note
     from swingrt.io import load_flight
     from swingrt.reports import plot_pareto
 
@@ -171,6 +172,9 @@ def run(args) -> int:
                 print(f"  and first on: {cc['twin']['plant']}")
             elif twin is not None:
                 print("  twin not flown: no white-box payload to carry (model-only check)")
+            choice = result.model.diagnostics.get("swing_drag_choice")
+            if choice is not None:
+                print(f"  {swing_drag_note(choice)}")
         model = result.model
     else:
         model = sysid.identify(data, axes=args.axes, **checked)

@@ -1,5 +1,6 @@
-"""The notes of an experiment's report: when the adaptive MPC re-adopted a model, and
-where the MPC and the LQR differ."""
+"""The notes of an experiment's report: when the adaptive MPC re-adopted a model, where
+the MPC and the LQR differ, and which drag removal of the IMU's swing the selection
+chose."""
 
 from __future__ import annotations
 
@@ -69,3 +70,17 @@ def compare_mpc_lqr(mpc: dict[str, Any], lqr: dict[str, Any], *, alike: float = 
         better.append(f"{k} {who} ({a:.3g} MPC vs {b:.3g} LQR)")
     out = "MPC vs LQR: better " + ("; ".join(better) if better else "on nothing")
     return out + (f"; alike (within {alike:.0%}): {', '.join(same)}" if same else "")
+
+
+def swing_drag_note(choice: dict[str, Any]) -> str:
+    """What the report says of the drag removals the selection weighed on the IMU's swing
+    (``diagnostics['swing_drag_choice']``, :func:`swingrt.sysid.select_for_control`): each
+    one's pick and its swing on the twin's step against PX4's, and which flies."""
+
+    def one(w: dict[str, Any]) -> str:
+        swing = w["twin_swing_vs_pid"]
+        on_twin = "no twin" if swing is None else f"{swing:.3f}× PX4's swing on the twin"
+        return f"{w['drag']} (q = {w['q']}, p = {w['p']}, {w['law']}, {on_twin})"
+
+    weighed = "; ".join(one(w) for w in choice["weighed"])
+    return f"drag removal weighed by the selection: {weighed}; flown: {choice['chosen']}"

@@ -18,7 +18,7 @@ from typing import Any
 
 from swingrt.experiments.controllers import simulate_controller
 from swingrt.experiments.identification import identify_case, train_methods, without_whitebox
-from swingrt.experiments.notes import adaptation_note, compare_mpc_lqr
+from swingrt.experiments.notes import adaptation_note, compare_mpc_lqr, swing_drag_note
 from swingrt.experiments.scenarios import (
     case_step,
     cases,
@@ -63,20 +63,6 @@ def swing_scale_note(scale: dict[str, Any]) -> str:
         f"explaining {100 * fit['explained']:.0f} % of the estimate), assumed {assumed:.3f} m/s²"
         + _drag_note(fit)
     )
-
-
-def swing_drag_note(choice: dict[str, Any]) -> str:
-    """What the report says of the drag removals the selection weighed on the IMU's swing
-    (``diagnostics['swing_drag_choice']``, :func:`swingrt.sysid.select_for_control`): each
-    one's pick and its swing on the twin's step against PX4's, and which flies."""
-
-    def one(w: dict[str, Any]) -> str:
-        swing = w["twin_swing_vs_pid"]
-        on_twin = "no twin" if swing is None else f"{swing:.3f}× PX4's swing on the twin"
-        return f"{w['drag']} (q = {w['q']}, p = {w['p']}, {w['law']}, {on_twin})"
-
-    weighed = "; ".join(one(w) for w in choice["weighed"])
-    return f"drag removal weighed by the selection: {weighed}; flown: {choice['chosen']}"
 
 
 def _drag_note(fit: dict[str, Any]) -> str:
