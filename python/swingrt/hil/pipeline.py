@@ -79,6 +79,7 @@ def run_on_px4(
     the offboard node after the MPC in the same PX4 session (a method whose flight the node
     aborts, e.g. a tick over its period, gets a row that says why)."""
     from swingrt import sysid
+    from swingrt.experiments.notes import swing_drag_note
     from swingrt.experiments.schema import Experiment
     from swingrt.hil.session import HilSession
     from swingrt.io import load_flight
@@ -265,6 +266,9 @@ def run_on_px4(
         f"{model.delays}, p = {model.rank}, test NMAE {float('nan') if nm is None else nm:.4f}"
         f"; swing source {model.diagnostics.get('swing_source', 'sensor')}"
     )
+    choice = model.diagnostics.get("swing_drag_choice")
+    if choice is not None:
+        notes.append(swing_drag_note(choice))
     notes += summaries
     exp = Experiment(
         name="px4-default-step",
