@@ -399,7 +399,9 @@ def with_swing_drag(data: Any, drag: str) -> Trace:
     whose identification, selection and model (:func:`flown_estimator`) remove that."""
     meta = dict(getattr(data, "meta", None) or {})
     meta[SWING_DRAG_META] = drag
-    return Trace(_columns(data), meta, source=getattr(data, "source", ""))
+    # A mapping may hold non-numeric columns, which nothing here reads (as in resample).
+    cols = {k: v for k, v in _columns(data).items() if np.asarray(v).dtype.kind in "fiub"}
+    return Trace(cols, meta, source=getattr(data, "source", ""))
 
 
 def swing_estimator(data: Any) -> dict[str, Any] | None:
