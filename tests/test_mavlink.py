@@ -33,6 +33,9 @@ from swingrt.mavlink.link import (
     wait_heartbeat,
 )
 
+# On wall time (sockets, a paced vehicle, timeouts): CI runs these after the rest, alone.
+pytestmark = pytest.mark.realtime
+
 HERE = Path(__file__).resolve()
 OFFBOARD = PX4_MAIN_MODE["OFFBOARD"]
 

@@ -394,8 +394,11 @@ fn main() {
         "{:<20} {:>9} {:>8} {:>9}  findings (seed {}, {} s per target)",
         "target", "execs", "corpus", "execs/s", o.seed, o.seconds
     );
-    for (ti, (name, f)) in selected.iter().enumerate() {
+    for (name, f) in &selected {
         let corpus = load_corpus(&o.corpus.join(name));
+        // Seeded by the target's place in the whole list, so that a target draws the same
+        // inputs whether it runs alone, with all of them or split over processes.
+        let ti = TARGETS.iter().position(|(n, _)| n == name).unwrap_or(0);
         let mut rng = ChaCha8Rng::seed_from_u64(o.seed.wrapping_mul(1000).wrapping_add(ti as u64));
         let mut st = Stats::default();
         let t0 = Instant::now();

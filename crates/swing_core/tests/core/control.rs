@@ -913,56 +913,10 @@ fn predicted_trajectory_matches_an_open_loop_rollout() {
 
 // ------------------------------------------------- no allocation per tick
 
-mod counting {
-    use std::alloc::{GlobalAlloc, Layout, System};
-    use std::cell::Cell;
-
-    thread_local! {
-        static COUNTING: Cell<bool> = const { Cell::new(false) };
-        static COUNT: Cell<usize> = const { Cell::new(0) };
-    }
-
-    pub struct Counter;
-
-    unsafe impl GlobalAlloc for Counter {
-        unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-            let _ = COUNTING.try_with(|c| {
-                if c.get() {
-                    let _ = COUNT.try_with(|n| n.set(n.get() + 1));
-                }
-            });
-            unsafe { System.alloc(layout) }
-        }
-        unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-            unsafe { System.dealloc(ptr, layout) }
-        }
-        unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-            let _ = COUNTING.try_with(|c| {
-                if c.get() {
-                    let _ = COUNT.try_with(|n| n.set(n.get() + 1));
-                }
-            });
-            unsafe { System.realloc(ptr, layout, new_size) }
-        }
-    }
-
-    /// Allocations made on this thread while running `f`.
-    pub fn count<F: FnOnce()>(f: F) -> usize {
-        COUNT.with(|n| n.set(0));
-        COUNTING.with(|c| c.set(true));
-        f();
-        COUNTING.with(|c| c.set(false));
-        COUNT.with(|n| n.get())
-    }
-}
-
-#[global_allocator]
-static ALLOC: counting::Counter = counting::Counter;
-
 #[test]
 fn mpc_and_lqr_ticks_allocate_nothing() {
     // The counter does see allocations.
-    assert!(counting::count(|| drop(std::hint::black_box(vec![1.0f64; 10]))) > 0);
+    assert!(crate::counting::count(|| drop(std::hint::black_box(vec![1.0f64; 10]))) > 0);
     let m = model(0.3, 2.0, 4);
     for (s, must_constrain) in [
         (
@@ -991,7 +945,7 @@ fn mpc_and_lqr_ticks_allocate_nothing() {
             let r = [if (k / 100) % 2 == 0 { 4.0 } else { -4.0 }];
             let mut u = [0.0];
             let mut info = None;
-            let n = counting::count(|| info = Some(ctrl.step(&st, &r, &mut u).unwrap()));
+            let n = crate::counting::count(|| info = Some(ctrl.step(&st, &r, &mut u).unwrap()));
             assert_eq!(n, 0, "tick {k} allocated {n} times");
             if info.unwrap().kind == TickKind::Constrained {
                 constrained += 1;
@@ -1003,7 +957,7 @@ fn mpc_and_lqr_ticks_allocate_nothing() {
     let mut lqr = LqrController::new(params(0.2, 1.0), 2, LqrSettings::default()).unwrap();
     let st = [AxisState::default(); 2];
     let mut u = [0.0; 2];
-    let n = counting::count(|| {
+    let n = crate::counting::count(|| {
         for _ in 0..100 {
             lqr.step(&st, &[1.0, -1.0], &mut u).unwrap();
         }
@@ -1040,7 +994,7 @@ fn tracking_mpc_ticks_with_their_preview_allocate_nothing() {
         let st = plant.state();
         let mut u = [0.0; 2];
         let mut info = None;
-        let n = counting::count(|| {
+        let n = crate::counting::count(|| {
             g.update(t, TS, &[pos[0], pos[1], -10.0], &[st[0].v, st[1].v, 0.0]);
             let view = buf.fill(g.as_ref(), t, TS);
             ctrl.observe_reference(&pos, &view);

@@ -265,56 +265,10 @@ fn thread_synthesis_swaps_without_blocking_the_tick() {
     assert!(slowest < 5e-3, "a tick took {slowest} s");
 }
 
-mod counting {
-    use std::alloc::{GlobalAlloc, Layout, System};
-    use std::cell::Cell;
-
-    thread_local! {
-        static COUNTING: Cell<bool> = const { Cell::new(false) };
-        static COUNT: Cell<usize> = const { Cell::new(0) };
-    }
-
-    pub struct Counter;
-
-    unsafe impl GlobalAlloc for Counter {
-        unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-            let _ = COUNTING.try_with(|c| {
-                if c.get() {
-                    let _ = COUNT.try_with(|n| n.set(n.get() + 1));
-                }
-            });
-            unsafe { System.alloc(layout) }
-        }
-        unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-            unsafe { System.dealloc(ptr, layout) }
-        }
-        unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-            let _ = COUNTING.try_with(|c| {
-                if c.get() {
-                    let _ = COUNT.try_with(|n| n.set(n.get() + 1));
-                }
-            });
-            unsafe { System.realloc(ptr, layout, new_size) }
-        }
-    }
-
-    /// Allocations made on this thread while running `f`.
-    pub fn count<F: FnOnce()>(f: F) -> usize {
-        COUNT.with(|n| n.set(0));
-        COUNTING.with(|c| c.set(true));
-        f();
-        COUNTING.with(|c| c.set(false));
-        COUNT.with(|n| n.get())
-    }
-}
-
-#[global_allocator]
-static ALLOC: counting::Counter = counting::Counter;
-
 /// Ticks allocate nothing, including the ticks that request a rebuild and swap one in.
 #[test]
 fn adaptive_ticks_allocate_nothing_even_when_swapping() {
-    assert!(counting::count(|| drop(std::hint::black_box(vec![1.0f64; 10]))) > 0);
+    assert!(crate::counting::count(|| drop(std::hint::black_box(vec![1.0f64; 10]))) > 0);
     let light = model(0.1, 0.5);
     let heavy = model(0.3, 2.0);
     let mut ctrl = AdaptiveMpc::new(&light, MpcSettings::default(), settings()).unwrap();
@@ -324,7 +278,7 @@ fn adaptive_ticks_allocate_nothing_even_when_swapping() {
     for k in 0..3000 {
         let st: Vec<AxisState> = plant.state();
         let r = [reference(k)];
-        let n = counting::count(|| {
+        let n = crate::counting::count(|| {
             ctrl.step(&st, &r, &mut u).unwrap();
         });
         assert_eq!(n, 0, "tick {k} allocated {n} times");
