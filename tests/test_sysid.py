@@ -711,6 +711,19 @@ def test_select_for_control_rejects_the_nmae_best_model_that_cannot_fly():
     assert flown["nmae_best"]["swing_iae_deg_s"] > 2 * flown["selected"]["swing_iae_deg_s"], flown
 
 
+def test_readings_of_a_flight_are_weighed_by_the_core_s_pick_order():
+    # The drag choice's rule (choose_reading): the better pick, then the least twin swing,
+    # then the earlier reading; no pick or no figure ranks last.
+    weigh = _core.selection_choose_reading
+    assert weigh([]) is None
+    assert weigh([("least_swing", 0.01), ("within_bounds", 0.4)]) == 1
+    assert weigh([("within_bounds", None), ("within_bounds", 0.3)]) == 1
+    assert weigh([(None, 0.0), ("least_miss", None)]) == 1
+    assert weigh([("least_miss", 0.2), ("least_miss", 0.2)]) == 0
+    with pytest.raises(ConfigError, match='pick_kind: unknown pick "best"'):
+        weigh([("within_bounds", 0.1), ("best", 0.1)])
+
+
 def test_select_for_control_bounds():
     train, _ = _grid_case("mp0.2_l0.5")
     result = sysid.search(train)

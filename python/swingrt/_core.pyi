@@ -43,6 +43,7 @@ __all__ = [
     "mpc_tick_timing",
     "pendulum_model",
     "select_for_control",
+    "selection_choose_reading",
     "sim_real_time_factor",
     "step_overshoot",
     "velocity_wander",
@@ -292,6 +293,7 @@ def select_for_control(
     selection: Any = None,
     twin: Scenario | None = None,
 ) -> tuple[LinearModel, bool]: ...
+def selection_choose_reading(picks: list[tuple[str | None, float | None]]) -> int | None: ...
 def evaluate(
     model: LinearModel,
     x: npt.NDArray[np.float64],

@@ -903,7 +903,10 @@ def select_for_control(
     if len(runs) == 1:
         return runs[0][1]
     weighed = [{"drag": drag, **_pick_outcome(r.model)} for drag, r in runs]
-    best = min(range(len(runs)), key=lambda i: (_pick_rank(weighed[i]), i))
+    best = _core.selection_choose_reading(
+        [(w["pick_kind"], w["twin_swing_vs_pid"]) for w in weighed]
+    )
+    assert best is not None  # two readings or more
     chosen = runs[best][1]
     record = {"chosen": runs[best][0], "weighed": weighed}
     return replace(chosen, model=chosen.model.with_diagnostics({"swing_drag_choice": record}))
@@ -923,11 +926,6 @@ def _drag_views(data: Any, drags: Sequence[str]) -> list[tuple[str | None, Any]]
     return [(d, data if d == own else with_swing_drag(data, d)) for d in drags]
 
 
-#: :func:`select_for_control`'s picks in order of preference, as the core's ``choose``
-#: ranks candidates (``control_check['pick_kind']``).
-_PICK_KINDS = ("within_bounds", "least_swing", "least_miss")
-
-
 def _pick_outcome(model: LinearModel) -> dict[str, Any]:
     """What the twin said of a selection's pick: how it was picked, the law it flies, its
     (q, p), its swing excess on the twin's step over PX4's there (None without a twin) and
@@ -944,16 +942,6 @@ def _pick_outcome(model: LinearModel) -> dict[str, Any]:
         "twin_swing_vs_pid": None if swing is None or not ref else float(swing) / float(ref),
         "twin": flown.get("twin"),
     }
-
-
-def _pick_rank(outcome: Mapping[str, Any]) -> tuple[int, float]:
-    """The order :func:`select_for_control` weighs selections in, the core's rule for
-    candidates (``design::selection::choose``): within every bound first, then the least
-    swing on the twin relative to PX4's there."""
-    kind = outcome["pick_kind"]
-    order = _PICK_KINDS.index(kind) if kind in _PICK_KINDS else len(_PICK_KINDS)
-    swing = outcome["twin_swing_vs_pid"]
-    return order, math.inf if swing is None else swing
 
 
 def _select(

@@ -644,6 +644,28 @@ fn sysid_attitude_lag(
     Ok(lag::attitude_lag(&train, 1, dt).map(|fit| fit.tau))
 }
 
+/// Which of several selections made on readings of one flight to fly, each given as its
+/// `pick_kind` (None: no pick) and its swing excess on the twin over PX4's there
+/// (`swing_core::design::selection::choose_reading`); None when there are none.
+#[pyfunction]
+fn selection_choose_reading(picks: Vec<(Option<String>, Option<f64>)>) -> PyResult<Option<usize>> {
+    let picks = picks
+        .into_iter()
+        .map(|(kind, swing)| match kind {
+            None => Ok((None, swing)),
+            Some(k) => selection::Pick::from_name(&k)
+                .map(|p| (Some(p), swing))
+                .ok_or_else(|| {
+                    to_py(swing_core::ConfigError::new(
+                        "pick_kind",
+                        format!("unknown pick {k:?} (within_bounds, least_swing, least_miss)"),
+                    ))
+                }),
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    Ok(selection::choose_reading(&picks))
+}
+
 /// Quadratic-regression smoothing (thesis 4.6.6, states).
 #[pyfunction]
 fn sysid_smooth_quadratic<'py>(
@@ -675,6 +697,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(check_settings, m)?)?;
     m.add_function(wrap_pyfunction!(identify, m)?)?;
     m.add_function(wrap_pyfunction!(select_for_control, m)?)?;
+    m.add_function(wrap_pyfunction!(selection_choose_reading, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
     m.add_function(wrap_pyfunction!(whitebox_payload_mass, m)?)?;
     m.add_function(wrap_pyfunction!(sysid_fft_peak, m)?)?;

@@ -992,8 +992,9 @@ impl CheckedCandidate {
     }
 }
 
-/// How [`choose`] picked a candidate; its text goes into the diagnostics' `pick`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// How [`choose`] picked a candidate; its text goes into the diagnostics' `pick`. Ordered
+/// as [`choose`] prefers them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Pick {
     /// Of the candidates that passed, the one of lowest cost.
     WithinBounds,
@@ -1012,6 +1013,13 @@ impl Pick {
             Self::LeastSwing => "least_swing",
             Self::LeastMiss => "least_miss",
         }
+    }
+
+    /// The pick that [`Pick::name`] names, `None` for any other text.
+    pub fn from_name(name: &str) -> Option<Self> {
+        [Self::WithinBounds, Self::LeastSwing, Self::LeastMiss]
+            .into_iter()
+            .find(|p| p.name() == name)
     }
 }
 
@@ -1057,6 +1065,25 @@ pub fn choose(checked: &[CheckedCandidate], settings: &SelectionSettings) -> Opt
         ta.total_cmp(&tb).then(la.total_cmp(&lb))
     });
     least_miss.map(|(i, _)| (i, Pick::LeastMiss))
+}
+
+/// Which of several whole selections to fly, each made on its own reading of one flight
+/// (the IMU's swing with and without the drag removed): given each one's pick (`None`: it
+/// has none) and its swing excess on the twin's step over PX4's there (`None` without a
+/// twin), the index of the one [`choose`] would prefer: the better pick first, no pick last,
+/// then the least swing, no figure (or not a number) last; ties go to the earlier reading.
+/// `None` when `picks` is empty.
+pub fn choose_reading(picks: &[(Option<Pick>, Option<f64>)]) -> Option<usize> {
+    let swing = |r: Option<f64>| r.filter(|r| !r.is_nan()).unwrap_or(f64::INFINITY);
+    picks
+        .iter()
+        .enumerate()
+        .min_by(|(_, (pa, ra)), (_, (pb, rb))| {
+            (pa.is_none(), pa)
+                .cmp(&(pb.is_none(), pb))
+                .then(swing(*ra).total_cmp(&swing(*rb)))
+        })
+        .map(|(i, _)| i)
 }
 
 /// A maker of fresh copies of one law's controller, one per flight (flights run side by
@@ -2593,6 +2620,41 @@ mod tests {
             ..trial(2.5, true, None)
         };
         assert_eq!(choose_disturbance(&[pick, diverged], &s), 0);
+    }
+
+    #[test]
+    fn a_reading_is_chosen_by_its_pick_then_its_twin_swing_then_its_place() {
+        use Pick::*;
+        let (within, least_swing, least_miss) =
+            (Some(WithinBounds), Some(LeastSwing), Some(LeastMiss));
+        assert_eq!(choose_reading(&[]), None);
+        // A better pick wins whatever the swing; no pick is the worst.
+        let r = [(least_swing, Some(0.01)), (within, Some(0.4))];
+        assert_eq!(choose_reading(&r), Some(1));
+        assert_eq!(
+            choose_reading(&[(least_miss, Some(0.0)), (least_swing, None)]),
+            Some(1)
+        );
+        assert_eq!(
+            choose_reading(&[(None, Some(0.0)), (least_miss, None)]),
+            Some(1)
+        );
+        // Of the same pick, the least swing; no figure or NaN is the worst swing.
+        let r = [(within, None), (within, Some(0.3)), (within, Some(0.2))];
+        assert_eq!(choose_reading(&r), Some(2));
+        let r = [(within, Some(f64::NAN)), (within, Some(9.0))];
+        assert_eq!(choose_reading(&r), Some(1));
+        // Ties go to the earlier reading.
+        assert_eq!(
+            choose_reading(&[(least_miss, Some(0.2)), (least_miss, Some(0.2))]),
+            Some(0)
+        );
+        assert_eq!(choose_reading(&[(None, None), (None, None)]), Some(0));
+        // The names round-trip; anything else is no pick.
+        for p in [WithinBounds, LeastSwing, LeastMiss] {
+            assert_eq!(Pick::from_name(p.name()), Some(p));
+        }
+        assert_eq!(Pick::from_name("best"), None);
     }
 
     #[test]

@@ -8,20 +8,15 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use swing_core::control::{AxisState, LinearPlant, MpcSettings, SwingController};
 use swing_core::design::{AdaptiveMpc, AdaptiveSettings, SynthesisMode};
-use swing_core::plant::PendulumModel;
 use swing_core::sysid::LinearModel;
 use swing_core::testing::delay_model;
+
+use crate::fixtures::pendulum;
 
 const TS: f64 = 0.03;
 
 fn model(m_p: f64, l: f64) -> LinearModel {
-    let p = PendulumModel {
-        m_q: 0.952,
-        m_p,
-        l,
-        c: 0.002,
-    };
-    delay_model(&p, TS, 3, 7).unwrap()
+    delay_model(&pendulum(m_p, l), TS, 3, 7).unwrap()
 }
 
 /// Square-wave velocity reference: ±1.5 m/s, 5 s per level.

@@ -15,16 +15,9 @@ use swing_core::plant::PendulumModel;
 use swing_core::sysid::LinearModel;
 use swing_core::testing::delay_model;
 
-const TS: f64 = 0.03;
+use crate::fixtures::pendulum;
 
-fn params(m_p: f64, l: f64) -> PendulumModel {
-    PendulumModel {
-        m_q: 0.952,
-        m_p,
-        l,
-        c: 0.002,
-    }
-}
+const TS: f64 = 0.03;
 
 fn care_residual(
     a: &DMatrix<f64>,
@@ -59,7 +52,7 @@ fn spectral_radius(m: &DMatrix<f64>) -> f64 {
 #[test]
 fn care_on_the_lqr_model_has_zero_residual_and_stable_loop() {
     for (m_p, l) in [(0.1, 0.5), (0.2, 1.0), (0.3, 2.0)] {
-        let (a, b) = params(m_p, l).integral_model();
+        let (a, b) = pendulum(m_p, l).integral_model();
         let q = DMatrix::from_diagonal(&DVector::from_vec(vec![0.1, 10.0, 0.0, 100.0]));
         let r = DMatrix::from_element(1, 1, 13.0);
         let sol = care(&a, &b, &q, &r).unwrap();
@@ -80,7 +73,7 @@ fn care_on_the_lqr_model_has_zero_residual_and_stable_loop() {
 
 #[test]
 fn dare_on_a_discretised_model_has_zero_residual_and_stable_loop() {
-    let (a, b) = params(0.2, 1.0).integral_model();
+    let (a, b) = pendulum(0.2, 1.0).integral_model();
     let (ad, bd) = c2d_zoh(&a, &b, 0.02);
     let q = DMatrix::from_diagonal(&DVector::from_vec(vec![0.1, 10.0, 0.0, 100.0])) * 0.02;
     let r = DMatrix::from_element(1, 1, 13.0 * 0.02);
@@ -109,7 +102,7 @@ fn dare_matches_value_iteration_on_a_random_system() {
 
 #[test]
 fn sampled_lqr_gain_tends_to_the_continuous_gain() {
-    let (a, b) = params(0.2, 1.0).integral_model();
+    let (a, b) = pendulum(0.2, 1.0).integral_model();
     let q = DMatrix::from_diagonal(&DVector::from_vec(vec![0.1, 10.0, 0.0, 100.0]));
     let r = DMatrix::from_element(1, 1, 13.0);
     let kc = care(&a, &b, &q, &r).unwrap().k;
@@ -155,7 +148,7 @@ fn simulate_pendulum(
 #[test]
 fn lqr_tracks_a_velocity_step_and_damps_the_swing() {
     for (m_p, l) in [(0.1, 0.5), (0.3, 2.0)] {
-        let p = params(m_p, l);
+        let p = pendulum(m_p, l);
         let mut lqr = LqrController::new(p, 1, LqrSettings::default()).unwrap();
         assert!(lqr.riccati().residual < 1e-8);
         let (vs, ss, _) = simulate_pendulum(p, &mut lqr, 2.0, 120.0, 0.3);
@@ -176,22 +169,22 @@ fn lqr_rejects_bad_settings_and_inputs() {
         ..Default::default()
     };
     assert!(matches!(
-        LqrController::new(params(0.2, 1.0), 1, bad),
+        LqrController::new(pendulum(0.2, 1.0), 1, bad),
         Err(ControlError::Config(_))
     ));
     assert!(matches!(
         LqrController::new(
             PendulumModel {
                 l: 0.0,
-                ..params(0.2, 1.0)
+                ..pendulum(0.2, 1.0)
             },
             1,
             LqrSettings::default()
         ),
         Err(ControlError::Config(_))
     ));
-    assert!(LqrController::new(params(0.2, 1.0), 3, LqrSettings::default()).is_err());
-    let mut c = LqrController::new(params(0.2, 1.0), 2, LqrSettings::default()).unwrap();
+    assert!(LqrController::new(pendulum(0.2, 1.0), 3, LqrSettings::default()).is_err());
+    let mut c = LqrController::new(pendulum(0.2, 1.0), 2, LqrSettings::default()).unwrap();
     let mut out = [0.0; 2];
     assert!(matches!(
         c.step(&[AxisState::default()], &[0.0, 0.0], &mut out),
@@ -212,7 +205,7 @@ fn lqr_rejects_bad_settings_and_inputs() {
 /// q ≥ 2: the fitted delay model over [v, swing]; q = 1: the exact ZOH model over
 /// [v, swing, swing_rate] (one frame cannot hold a pendulum without its rate).
 fn model(m_p: f64, l: f64, q: usize) -> LinearModel {
-    let p = params(m_p, l);
+    let p = pendulum(m_p, l);
     let mut m = delay_model(&p, TS, q.max(2), 7).unwrap();
     if q == 1 {
         let (a, b) = p.continuous();
@@ -771,7 +764,7 @@ fn default_tuning_damps_the_swing_on_every_seed_payload() {
     // Plant: exact ZOH of the continuous pendulum (not the fitted model the MPC uses).
     for l in [0.5, 1.0, 2.0] {
         for m_p in [0.1, 0.3] {
-            let p = params(m_p, l);
+            let p = pendulum(m_p, l);
             let m = model(m_p, l, 2);
             let mut mpc = MpcController::new(&m, MpcSettings::default()).unwrap();
             let (vs, ss, _) = simulate_pendulum(p, &mut mpc, 2.0, 12.0, 0.0);
@@ -954,7 +947,7 @@ fn mpc_and_lqr_ticks_allocate_nothing() {
         }
         assert_eq!(constrained > 0, must_constrain);
     }
-    let mut lqr = LqrController::new(params(0.2, 1.0), 2, LqrSettings::default()).unwrap();
+    let mut lqr = LqrController::new(pendulum(0.2, 1.0), 2, LqrSettings::default()).unwrap();
     let st = [AxisState::default(); 2];
     let mut u = [0.0; 2];
     let n = crate::counting::count(|| {
@@ -969,7 +962,7 @@ fn mpc_and_lqr_ticks_allocate_nothing() {
 fn tracking_mpc_ticks_with_their_preview_allocate_nothing() {
     use swing_core::control::{TrackingMpc, TrackingSettings};
     use swing_core::mission::{GuidanceSettings, Mission, PreviewBuffer};
-    let m = swing_core::testing::pendulum_delay_model(&params(0.3, 1.5), TS, 4, 2, 7).unwrap();
+    let m = swing_core::testing::pendulum_delay_model(&pendulum(0.3, 1.5), TS, 4, 2, 7).unwrap();
     let mission = Mission::from_toml(
         "acceptance_radius = 0.3\nhold = 2.0\n[[waypoint]]\nn = 20\ne = 0\nd = -10\n\
          [[waypoint]]\nn = 20\ne = 15\nd = -10\n",
@@ -1017,7 +1010,7 @@ fn tracking_mpc_ticks_with_their_preview_allocate_nothing() {
 fn a_horizon_shorter_than_the_swing_period_underdamps_a_two_metre_cable() {
     // With one fixed tuning, the prediction horizon must span a swing period of
     // the longest cable (≈ 2.5–2.8 s for 2 m); 1.8 s (60 ticks) leaves it under-damped.
-    let p = params(0.1, 2.0);
+    let p = pendulum(0.1, 2.0);
     let m = model(0.1, 2.0, 2);
     let iae = |np: usize| {
         // A moderate swing-rate weight, where the horizon matters most (the defaults damp
@@ -1203,7 +1196,7 @@ fn noise_gain_matches_a_seeded_noise_simulation() {
     use rand_distr::{Distribution, Normal};
     use swing_core::design::check::{noise_gain, MeasurementNoise};
     let model = truncated_flight_model();
-    let plant_model = delay_model(&params(0.2, 1.0), TS, 2, 3).unwrap();
+    let plant_model = delay_model(&pendulum(0.2, 1.0), TS, 2, 3).unwrap();
     let mut mpc = MpcController::new(&model, unbounded()).unwrap();
     let noise = MeasurementNoise {
         velocity: 0.02,
@@ -1251,7 +1244,7 @@ fn velocity_wander_matches_a_seeded_noise_simulation() {
     use rand_distr::{Distribution, Normal};
     use swing_core::design::check::{velocity_wander, MeasurementNoise};
     let model = truncated_flight_model();
-    let plant_model = delay_model(&params(0.2, 1.0), TS, 2, 3).unwrap();
+    let plant_model = delay_model(&pendulum(0.2, 1.0), TS, 2, 3).unwrap();
     let noise = swing_noise(0.01);
     let span = 2.0;
     let window = (span / TS).round() as usize;
@@ -1326,7 +1319,7 @@ fn the_wander_of_the_block_that_reaches_the_velocity_is_the_whole_loop_s() {
     use swing_core::design::check::{lagged_noise_loop, velocity_wander};
     use swing_core::linalg::{stationary_covariance, window_mean_std, Stationary};
     let model = truncated_flight_model();
-    let plant = delay_model(&params(0.2, 1.0), TS, 2, 3).unwrap();
+    let plant = delay_model(&pendulum(0.2, 1.0), TS, 2, 3).unwrap();
     let noise = swing_noise(0.01);
     let span = 2.0;
     let mpc = MpcController::new(&model, unbounded()).unwrap();
@@ -1363,7 +1356,7 @@ fn the_wander_of_the_block_that_reaches_the_velocity_is_the_whole_loop_s() {
 fn the_swing_measurement_noise_is_carried_by_the_model_and_lowers_the_wander() {
     use swing_core::design::check::velocity_wander;
     let model = truncated_flight_model();
-    let plant = delay_model(&params(0.2, 1.0), TS, 2, 3).unwrap();
+    let plant = delay_model(&pendulum(0.2, 1.0), TS, 2, 3).unwrap();
     let noise = swing_noise(0.01);
     let wander = |m: &LinearModel, r: Option<f64>| {
         let settings = MpcSettings {
@@ -1424,7 +1417,7 @@ fn measurement_noise_reaches_the_command_attenuated() {
         swing_rate: 0.0,
     };
     for (m_p, l) in [(0.2, 1.0), (0.1, 2.0), (0.3, 0.5)] {
-        let plant = delay_model(&params(m_p, l), TS, 2, 3).unwrap();
+        let plant = delay_model(&pendulum(m_p, l), TS, 2, 3).unwrap();
         let mpc = MpcController::new(&model, unbounded()).unwrap();
         let g = noise_gain(&mpc, &model, &plant, noise).unwrap();
         assert!(

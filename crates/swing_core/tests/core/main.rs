@@ -7,6 +7,7 @@ mod adaptive;
 mod config;
 mod control;
 mod counting;
+mod fixtures;
 mod formats;
 mod hostile;
 mod layers;

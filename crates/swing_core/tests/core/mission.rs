@@ -12,20 +12,12 @@ use swing_core::control::{
 use swing_core::mission::{
     EventKind, GuidanceMode, GuidanceSettings, Mission, PreviewBuffer, SCurve,
 };
-use swing_core::plant::PendulumModel;
 use swing_core::sim::{Scenario, Simulator};
 use swing_core::testing::pendulum_delay_model;
 
-const TS: f64 = 0.03;
+use crate::fixtures::pendulum;
 
-fn pendulum(m_p: f64, l: f64) -> PendulumModel {
-    PendulumModel {
-        m_q: 0.952,
-        m_p,
-        l,
-        c: 0.002,
-    }
-}
+const TS: f64 = 0.03;
 
 fn one_leg(n: f64, hold: f64) -> Mission {
     Mission::from_toml(&format!(
