@@ -13,6 +13,7 @@ mod hostile;
 mod layers;
 mod mission;
 mod plant;
+mod sensors;
 mod sysid;
 
 #[global_allocator]
