@@ -656,9 +656,10 @@ fn selection_choose_reading(picks: Vec<(Option<String>, Option<f64>)>) -> PyResu
             Some(k) => selection::Pick::from_name(&k)
                 .map(|p| (Some(p), swing))
                 .ok_or_else(|| {
+                    let known: Vec<_> = selection::Pick::ALL.iter().map(|p| p.name()).collect();
                     to_py(swing_core::ConfigError::new(
                         "pick_kind",
-                        format!("unknown pick {k:?} (within_bounds, least_swing, least_miss)"),
+                        format!("unknown pick {k:?} ({})", known.join(", ")),
                     ))
                 }),
         })

@@ -1006,6 +1006,9 @@ pub enum Pick {
 }
 
 impl Pick {
+    /// Every pick, in [`choose`]'s order of preference.
+    pub const ALL: [Self; 3] = [Self::WithinBounds, Self::LeastSwing, Self::LeastMiss];
+
     /// The name the diagnostics' `pick_kind` uses, in [`choose`]'s order of preference.
     pub fn name(self) -> &'static str {
         match self {
@@ -1017,9 +1020,7 @@ impl Pick {
 
     /// The pick that [`Pick::name`] names, `None` for any other text.
     pub fn from_name(name: &str) -> Option<Self> {
-        [Self::WithinBounds, Self::LeastSwing, Self::LeastMiss]
-            .into_iter()
-            .find(|p| p.name() == name)
+        Self::ALL.into_iter().find(|p| p.name() == name)
     }
 }
 
@@ -2651,9 +2652,13 @@ mod tests {
         );
         assert_eq!(choose_reading(&[(None, None), (None, None)]), Some(0));
         // The names round-trip; anything else is no pick.
-        for p in [WithinBounds, LeastSwing, LeastMiss] {
+        for p in Pick::ALL {
             assert_eq!(Pick::from_name(p.name()), Some(p));
         }
+        assert!(
+            Pick::ALL.windows(2).all(|w| w[0] < w[1]),
+            "ALL is in preference order"
+        );
         assert_eq!(Pick::from_name("best"), None);
     }
 
