@@ -81,6 +81,15 @@ def test_without_a_mass_the_vehicle_is_what_the_nominal_motors_hover_less_its_pa
     assert e.value.field == "payload"
 
 
+@pytest.mark.parametrize(("use_hte", "on"), [(0, False), (1, True), (None, True)])
+def test_px4_s_hover_thrust_estimator_switch_is_read_from_its_parameters(use_hte, on):
+    params = px4_parameters(Scenario.builtin("step"))
+    if use_hte is not None:
+        params["MPC_USE_HTE"] = use_hte
+    sc, _ = vehicle_from_px4(params)
+    assert sc.to_dict()["controller"]["hover_thrust_estimator"] is on
+
+
 def _params(**changes):
     p = px4_parameters(Scenario.builtin("step"))
     p.update(changes)

@@ -154,7 +154,11 @@ PX4_CONTROLLER: dict[str, tuple[str, int | None, float]] = {
     "MPC_THR_MIN": ("thrust_min", None, 1.0),
     "MPC_THR_MAX": ("thrust_max", None, 1.0),
     "MPC_THR_XY_MARG": ("thrust_xy_margin", None, 1.0),
+    "MPC_USE_HTE": ("hover_thrust_estimator", None, 1.0),
 }
+
+#: Controller fields PX4 holds as an integer switch (0 off, otherwise on).
+_SWITCHES = frozenset({"hover_thrust_estimator"})
 
 #: Spread of the rotors' |x| or |y|, as a fraction of the arm, beyond which the notes say
 #: that the frame was flown as a rectangle at their mean.
@@ -172,7 +176,9 @@ def controller_from_px4(
     for name, (field, index, factor) in PX4_CONTROLLER.items():
         if name not in params:
             continue
-        value = float(params[name]) * factor
+        value: float | bool = float(params[name]) * factor
+        if field in _SWITCHES:
+            value = value != 0.0
         if index is None:
             controller[field] = value
         else:

@@ -11,6 +11,7 @@ use thiserror::Error;
 use crate::error::{Categorized, Category};
 
 pub mod deepc;
+pub mod hover_thrust;
 pub mod layout;
 pub mod lqr;
 pub mod mpc;

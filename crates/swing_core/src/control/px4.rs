@@ -17,6 +17,7 @@ use nalgebra::{Matrix3, Quaternion, Rotation3, UnitQuaternion, Vector3, Vector4}
 use serde::{Deserialize, Serialize};
 
 use crate::config::{in_range, non_negative, positive, ConfigError};
+use crate::control::hover_thrust::HoverThrustEstimator;
 use crate::plant::dynamics::rotation;
 use crate::plant::params::{VehicleParams, GRAVITY};
 
@@ -67,6 +68,9 @@ pub struct Px4Params {
     /// `None` (and `None` is written as 0).
     #[serde(deserialize_with = "zero_is_none", serialize_with = "none_is_zero")]
     pub hover_thrust: Option<f64>,
+    /// Estimate the hover thrust in flight and adopt it (MPC_USE_HTE; PX4's default on):
+    /// [`crate::control::hover_thrust::HoverThrustEstimator`].
+    pub hover_thrust_estimator: bool,
     /// Rate-loop frequency [Hz] (must divide the physics rate).
     pub rate_loop_hz: f64,
     /// Attitude-loop frequency [Hz].
@@ -99,6 +103,7 @@ impl Default for Px4Params {
             thrust_max: 1.0,
             thrust_xy_margin: 0.3,
             hover_thrust: None,
+            hover_thrust_estimator: true,
             rate_loop_hz: 500.0,
             att_loop_hz: 250.0,
             pos_loop_hz: 50.0,
@@ -218,6 +223,7 @@ impl Setpoint {
 pub struct Px4Cascade {
     p: Px4Params,
     hover_thrust: f64,
+    hte: Option<HoverThrustEstimator>,
     thrust_at_hover: f64,
     vel_int: Vector3<f64>,
     vel_prev: Option<Vector3<f64>>,
@@ -269,9 +275,13 @@ impl Px4Cascade {
     /// A cascade at rest; `hover_thrust` is the normalised collective thrust that holds the
     /// weight PX4 believes it carries.
     pub fn new(p: Px4Params, hover_thrust: f64) -> Self {
+        let hte = p
+            .hover_thrust_estimator
+            .then(|| HoverThrustEstimator::new(hover_thrust));
         Self {
             p,
             hover_thrust,
+            hte,
             thrust_at_hover: hover_thrust,
             vel_int: Vector3::zeros(),
             vel_prev: None,
@@ -320,6 +330,16 @@ impl Px4Cascade {
         self.thr_sp = Vector3::new(0.0, 0.0, -thrust);
     }
 
+    /// Replace the hover thrust by `hover` [normalised] without a jump in thrust: the vertical
+    /// integrator takes up the difference (PX4 `PositionControl::updateHoverThrust`).
+    pub fn adopt_hover_thrust(&mut self, hover: f64) {
+        if hover > f64::EPSILON && hover != self.hover_thrust {
+            let a = self.acc_sp.z;
+            self.vel_int.z += (a - GRAVITY) * self.hover_thrust / hover + GRAVITY - a;
+            self.hover_thrust = hover;
+        }
+    }
+
     /// Clear the horizontal velocity integrator of `axis` (0 = N, 1 = E), for bumpless
     /// hand-back after an external controller commanded that axis.
     pub fn set_velocity_integrator(&mut self, axis: usize, value: f64) {
@@ -343,14 +363,24 @@ impl Px4Cascade {
         dt: f64,
         acc_bias: &Vector3<f64>,
     ) {
-        let p = &self.p;
         // Velocity derivative for the D term: finite difference, first-order low-pass.
         if let Some(prev) = self.vel_prev {
             let raw = (vel - prev) / dt;
-            let alpha = lowpass_alpha(p.veld_cutoff, dt);
+            let alpha = lowpass_alpha(self.p.veld_cutoff, dt);
             self.vel_dot += (raw - self.vel_dot) * alpha;
+            // The hover-thrust estimator reads the acceleration the last thrust setpoint
+            // produced, before this tick's control (PX4's order).
+            let speed_xy = (vel.x * vel.x + vel.y * vel.y).sqrt();
+            let adopted = self
+                .hte
+                .as_mut()
+                .and_then(|hte| hte.update(dt, -raw.z, -self.thr_sp.z, speed_xy, vel.z));
+            if let Some(hover) = adopted {
+                self.adopt_hover_thrust(hover);
+            }
         }
         self.vel_prev = Some(*vel);
+        let p = &self.p;
 
         // Position P → velocity setpoint; feed-through of velocity setpoints; acceleration
         // feed-forward (alone on acceleration axes, added to the PID's on trajectories).
@@ -430,12 +460,16 @@ impl Px4Cascade {
             thr.x *= xy_max / thr_xy;
             thr.y *= xy_max / thr_xy;
         }
-        // Tracking anti-windup in the horizontal plane (PX4: Rundqwist 1990).
+        // Tracking anti-windup in the horizontal plane (PX4: Rundqwist 1990), only while the
+        // thrust vector produces less horizontal acceleration than was asked for.
         let arw = 2.0 / p.vel_p[0];
-        for i in 0..2 {
-            let produced = thr[i] * (GRAVITY / ht);
-            if vel_sp[i].is_finite() {
-                vel_err[i] -= arw * (a[i] - produced);
+        let produced = (thr.x * (GRAVITY / ht), thr.y * (GRAVITY / ht));
+        let saturated = a.x * a.x + a.y * a.y > produced.0 * produced.0 + produced.1 * produced.1;
+        if saturated {
+            for (i, made) in [produced.0, produced.1].into_iter().enumerate() {
+                if vel_sp[i].is_finite() {
+                    vel_err[i] -= arw * (a[i] - made);
+                }
             }
         }
         for i in 0..3 {

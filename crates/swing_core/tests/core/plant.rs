@@ -522,3 +522,64 @@ fn the_x500_hovers_and_steps_under_the_cascade() {
     );
     assert!(s.vel.y.abs() < 0.02 && s.rate.norm() < 0.05);
 }
+
+/// The default step into a 2 m/s headwind, flown to a steady state under PX4's cascade that
+/// believes the hover thrust is `believed` times the true one: the North speed error, the
+/// cascade's North and Down acceleration setpoints, and the relative error of the hover
+/// thrust it ends with.
+fn headwind_cruise(believed: f64, estimator: bool) -> (f64, f64, f64, f64) {
+    let mut sc = Scenario::default_step();
+    sc.duration = 60.0;
+    sc.wind.velocity = [-2.0, 0.0, 0.0];
+    let truth = sc.hover_thrust();
+    sc.controller.hover_thrust = Some(truth * believed);
+    sc.controller.hover_thrust_estimator = estimator;
+    let mut sim = Simulator::new(sc).unwrap();
+    sim.run_to_end().unwrap();
+    let fc = sim.cascade();
+    (
+        2.0 - sim.state().vel.x,
+        fc.acc_sp.x,
+        fc.acc_sp.z,
+        fc.hover_thrust() / truth - 1.0,
+    )
+}
+
+#[test]
+fn a_wrong_hover_thrust_costs_the_closed_form_speed_error_without_px4_s_estimator_and_none_with_it()
+{
+    let vel_p = Scenario::default_step().controller.vel_p[0];
+    // Believed too high: the loop holds a downward a_z, the thrust vector then makes only
+    // (1 − a_z/g) of the horizontal acceleration asked, and the tracking anti-windup holds
+    // the integrator where that shortfall balances the error: e = (2/K_p)·a·a_z/g.
+    let (err, acc, acc_z, _) = headwind_cruise(1.05, false);
+    assert!(
+        acc > 0.5,
+        "the headwind's drag needs a forward acceleration setpoint: {acc}"
+    );
+    assert!(
+        acc_z > 0.3,
+        "a believed-high hover thrust is held by a downward a_z: {acc_z}"
+    );
+    let closed = 2.0 / vel_p * acc * acc_z / GRAVITY;
+    assert!(
+        (err - closed).abs() < 0.02 * closed,
+        "error {err}, closed form {closed}"
+    );
+    // Believed too low: the thrust vector makes more than was asked, nothing saturates and
+    // PX4 leaves the integrator alone.
+    let (err, _, acc_z, _) = headwind_cruise(0.95, false);
+    assert!(acc_z < -0.3, "{acc_z}");
+    assert!(err.abs() < 1e-3, "error {err}");
+    // With PX4's estimator the hover thrust is learnt in flight and both errors go.
+    for believed in [1.05, 0.95] {
+        let (err, _, acc_z, ht) = headwind_cruise(believed, true);
+        println!("believed x{believed}: error {err}, a_z {acc_z}, hover thrust off by {ht}");
+        assert!(err.abs() < 2e-3, "believed ×{believed}: error {err}");
+        assert!(acc_z.abs() < 0.05, "believed ×{believed}: a_z {acc_z}");
+        assert!(
+            ht.abs() < 0.03,
+            "believed ×{believed}: hover thrust off by {ht}"
+        );
+    }
+}
