@@ -66,6 +66,7 @@ _WRITTEN = (
     "MPC_THR_MIN",
     "MPC_THR_MAX",
     "MPC_TILTMAX_AIR",
+    "MPC_USE_HTE",
 )
 
 #: The roll and pitch rate gains, scaled by :data:`HIL_RATE_GAIN_SCALE` on PX4.
@@ -95,6 +96,9 @@ def px4_parameters(scenario: Scenario, *, takeoff_altitude: float | None = None)
     for name in _WRITTEN:
         field, index, factor = PX4_CONTROLLER[name]
         value = c[field] if index is None else c[field][index]
+        if field in _SWITCHES:
+            params[name] = int(bool(value))
+            continue
         if name in _HIL_SCALED:
             value *= scale
         params[name] = round(value / factor, 6)

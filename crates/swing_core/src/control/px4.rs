@@ -332,9 +332,11 @@ impl Px4Cascade {
 
     /// Replace the hover thrust by `hover` [normalised] without a jump in thrust: the vertical
     /// integrator takes up the difference (PX4 `PositionControl::updateHoverThrust`).
-    pub fn adopt_hover_thrust(&mut self, hover: f64) {
+    /// `acc_bias_z` is the vertical acceleration offset the last thrust was made with (see
+    /// [`Self::position_velocity`]): the thrust follows the setpoint plus it.
+    pub fn adopt_hover_thrust(&mut self, hover: f64, acc_bias_z: f64) {
         if hover > f64::EPSILON && hover != self.hover_thrust {
-            let a = self.acc_sp.z;
+            let a = self.acc_sp.z + acc_bias_z;
             self.vel_int.z += (a - GRAVITY) * self.hover_thrust / hover + GRAVITY - a;
             self.hover_thrust = hover;
         }
@@ -376,7 +378,7 @@ impl Px4Cascade {
                 .as_mut()
                 .and_then(|hte| hte.update(dt, -raw.z, -self.thr_sp.z, speed_xy, vel.z));
             if let Some(hover) = adopted {
-                self.adopt_hover_thrust(hover);
+                self.adopt_hover_thrust(hover, acc_bias.z);
             }
         }
         self.vel_prev = Some(*vel);
@@ -681,6 +683,48 @@ mod tests {
         let m = mix_quad_x(0.99, &Vector3::new(0.0, 0.2, 0.0));
         assert!((m[0] - m[1] - 2.0 * 0.2 * std::f64::consts::FRAC_1_SQRT_2).abs() < 1e-12);
         assert!(m.max() <= 1.0);
+    }
+
+    /// The collective after one position tick holding still at the origin, with the
+    /// vertical acceleration offset `bias_z`.
+    fn hold_collective(c: &mut Px4Cascade, bias_z: f64) -> f64 {
+        let at = Vector3::zeros();
+        c.position_velocity(
+            &Setpoint::hold(at),
+            &at,
+            &at,
+            0.02,
+            &Vector3::new(0.0, 0.0, bias_z),
+        );
+        c.thr_sp.z
+    }
+
+    #[test]
+    fn adopting_a_hover_thrust_keeps_the_thrust_with_a_vertical_offset() {
+        let p = Px4Params {
+            hover_thrust_estimator: false,
+            ..Px4Params::default()
+        };
+        let bias = -0.8;
+        for (told, jumps) in [(bias, false), (0.0, true)] {
+            let mut c = Px4Cascade::new(p.clone(), 0.5);
+            c.set_velocity_integrator(2, 0.6);
+            let before = hold_collective(&mut c, bias);
+            c.adopt_hover_thrust(0.42, told);
+            let after = hold_collective(&mut c, bias);
+            // Told the offset, PX4's rule keeps the thrust; without it the thrust moves by
+            // b (1 − Th'/Th) Th/g.
+            let expected = if jumps {
+                bias * (1.0 - 0.42 / 0.5) * 0.5 / GRAVITY
+            } else {
+                0.0
+            };
+            assert!(
+                ((before - after).abs() - expected.abs()).abs() < 1e-12,
+                "{before} {after}"
+            );
+            assert_eq!(c.hover_thrust(), 0.42);
+        }
     }
 
     #[test]
