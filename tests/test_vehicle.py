@@ -84,21 +84,19 @@ def test_without_a_mass_the_vehicle_is_what_the_nominal_motors_hover_less_its_pa
 @pytest.mark.parametrize(("use_hte", "on"), [(0, False), (1, True), (None, True)])
 def test_px4_s_hover_thrust_estimator_switch_is_read_from_its_parameters(use_hte, on):
     params = px4_parameters(Scenario.builtin("step"))
-    params.pop("MPC_USE_HTE")
     if use_hte is not None:
         params["MPC_USE_HTE"] = use_hte
     sc, _ = vehicle_from_px4(params)
     assert sc.to_dict()["controller"]["hover_thrust_estimator"] is on
 
 
-@pytest.mark.parametrize("on", [False, True])
-def test_the_hover_thrust_estimator_switch_is_written_for_px4_and_read_back(on):
-    sc = Scenario.builtin("step").with_overrides({"controller": {"hover_thrust_estimator": on}})
-    params = px4_parameters(sc)
-    # PX4 holds MPC_USE_HTE as an INT32: an integer, not a float.
-    assert params["MPC_USE_HTE"] == int(on) and type(params["MPC_USE_HTE"]) is int
-    back, _ = vehicle_from_px4(params)
-    assert back.to_dict()["controller"]["hover_thrust_estimator"] is on
+def test_the_hover_thrust_estimator_switch_is_not_written_for_px4():
+    # Current PX4 (the SITL build the tests fly) has no MPC_USE_HTE: its estimate is always
+    # adopted, as the cascade's default does.
+    params = px4_parameters(Scenario.builtin("step"))
+    assert "MPC_USE_HTE" not in params
+    sc, _ = vehicle_from_px4(params)
+    assert sc.to_dict()["controller"]["hover_thrust_estimator"] is True
 
 
 def _params(**changes):

@@ -66,7 +66,6 @@ _WRITTEN = (
     "MPC_THR_MIN",
     "MPC_THR_MAX",
     "MPC_TILTMAX_AIR",
-    "MPC_USE_HTE",
 )
 
 #: The roll and pitch rate gains, scaled by :data:`HIL_RATE_GAIN_SCALE` on PX4.
@@ -96,9 +95,6 @@ def px4_parameters(scenario: Scenario, *, takeoff_altitude: float | None = None)
     for name in _WRITTEN:
         field, index, factor = PX4_CONTROLLER[name]
         value = c[field] if index is None else c[field][index]
-        if field in _SWITCHES:
-            params[name] = int(bool(value))
-            continue
         if name in _HIL_SCALED:
             value *= scale
         params[name] = round(value / factor, 6)
@@ -158,6 +154,8 @@ PX4_CONTROLLER: dict[str, tuple[str, int | None, float]] = {
     "MPC_THR_MIN": ("thrust_min", None, 1.0),
     "MPC_THR_MAX": ("thrust_max", None, 1.0),
     "MPC_THR_XY_MARG": ("thrust_xy_margin", None, 1.0),
+    # Read from an older PX4's log; current PX4 has no such parameter and always adopts its
+    # hover-thrust estimate, so it is never written.
     "MPC_USE_HTE": ("hover_thrust_estimator", None, 1.0),
 }
 
