@@ -475,11 +475,11 @@ impl TwinPlant {
         Ok(out)
     }
 
-    /// Fly the controller `mpc` (not flown before) on the step held to
+    /// Fly the controller `ctrl` (not flown before) on the step held to
     /// [`TWIN_GUST_SECONDS`], with a headwind gust of [`TWIN_GUST`] on every flown axis from
     /// [`TWIN_GUST_AT`] and no sensor noise: how much swing the gust leaves and how soon the
     /// velocity is back on the setpoint ([`TwinGust`]).
-    pub fn gust(&self, mpc: MpcController) -> Result<TwinGust, ControlError> {
+    pub fn gust(&self, ctrl: Box<dyn SwingController>) -> Result<TwinGust, ControlError> {
         let mut sc = self.scenario.clone();
         sc.name = "twin gust check".into();
         sc.duration = TWIN_GUST_SECONDS;
@@ -490,7 +490,7 @@ impl TwinPlant {
             duration: TWIN_GUST_DURATION,
             amplitude: [against, if self.axes == 2 { against } else { 0.0 }, 0.0],
         }];
-        let Some(sim) = self.finish(self.start(sc, Box::new(mpc))?)? else {
+        let Some(sim) = self.finish(self.start(sc, ctrl)?)? else {
             return Ok(TwinGust::diverged());
         };
         let t = column(&sim, "t")?;
@@ -887,7 +887,7 @@ mod tests {
                 kf_disturbance_noise: q,
                 ..MpcSettings::default()
             };
-            twin.gust(MpcController::new(model, settings).unwrap())
+            twin.gust(Box::new(MpcController::new(model, settings).unwrap()))
                 .unwrap()
         };
         let slow = gust(&tpl, 0.02);
