@@ -806,8 +806,8 @@ def select_for_control(
     candidate within every bound also flies the twin's gust flight (below) and "swings
     least" is its step excess plus the gust's swing IAE (``checked[*].swing_cost``;
     ``pick_on_gust``, default True). Before a candidate flies, its estimator is designed
-    against the flight's swing noise: the swing channels' Kalman measurement noise is the first of ``noise_factors``
-    (default 1, 3, 10 times the MPC's own) whose predicted wander
+    against the flight's swing noise: the swing channels' Kalman measurement noise is the
+    first of ``noise_factors`` (default 1, 3, 10 times the MPC's own) whose predicted wander
     (:func:`swingrt._core.velocity_wander`, the standard deviation of the 2 s mean velocity
     on the white-box plant behind the largest lag) is within the twin's ``late_error`` over
     ``wander_sigmas`` (3.29: the noise alone ends one flight in a thousand past it), else the
