@@ -546,8 +546,12 @@ def test_a_pick_whose_command_cycles_an_unseen_lower_link_is_flown_smoother(tmp_
 
     spec_file = Path(__file__).resolve().parents[1] / "examples/campaigns/robustness-imu.toml"
     raw = tomllib.loads(spec_file.read_text()) | {"seed": 6}
+    # The candidates ranked on the step alone, as when this was measured: ranked on the
+    # twin's gust too (the default) the sample takes a pick that does not miss on the
+    # second link (0.86 of its bounds), and no smoother design is asked for.
+    raw["base"]["selection"] = {"pick_on_gust": False}
     off = copy.deepcopy(raw)
-    off["base"]["selection"] = {"spillover": {"acc_rate_factor": 1.0, "swing_noise": 0.0}}
+    off["base"]["selection"] |= {"spillover": {"acc_rate_factor": 1.0, "swing_noise": 0.0}}
     flown = {}
     for name, spec in (("default", raw), ("off", off)):
         rows, _ = fly_noise_draws(spec, 169, 1, tmp_path / name)

@@ -1299,8 +1299,9 @@ def test_the_imu_swing_s_trust_designed_on_the_twin_damps_from_the_model_in_flig
     swinging = ev.with_overrides({"payload": {"initial_swing_n": math.radians(3.8)}})
     slow = _fly(swinging, model)["swing_excess_iae_deg_s"]
     trusting_released = _fly(swinging, trusting_model)["swing_excess_iae_deg_s"]
-    assert slow > 2.0 * trusting_released, (slow, trusting_released)
-    # (As measured: 7.8 deg·s without the start, 2.0 with it, 1.9 as designed.)
+    assert slow > 1.5 * trusting_released, (slow, trusting_released)
+    # (As measured: 2.9 deg·s without the start, 1.5 as designed; with the candidates
+    # ranked on the step alone, before `pick_on_gust`, 7.8 and 1.9, and 2.0 with the start.)
     started = _fly(swinging, model, mpc_settings={"kf_start_spread": 3.0})
     assert started["swing_excess_iae_deg_s"] < 1.2 * trusting_released, (started, slow)
 
