@@ -1,11 +1,13 @@
-//! Fixtures of the design layer's tests: a flight of the built-in training scenario and a
-//! small model of it.
+//! Fixtures of the design layer's tests: a flight of the built-in training scenario, a
+//! small model of it and the twin of that vehicle.
 
+use crate::design::twin::TwinPlant;
 use crate::sim::{Scenario, Simulator};
 use crate::sysid::dmdc::{self, DmdcSettings};
 use crate::sysid::hankel::Trajectory;
-use crate::sysid::pipeline::named;
+use crate::sysid::pipeline::{named, whitebox_model};
 use crate::sysid::resample::resample;
+use crate::sysid::settings::IdentifySettings;
 use crate::sysid::LinearModel;
 
 /// The first `seconds` of the flight `sc`: (vn, swing_n) and acc_sp_n at 0.03 s.
@@ -38,4 +40,22 @@ pub(crate) fn template(sc: &Scenario) -> LinearModel {
         &["acc_sp_n".into()],
     )
     .unwrap()
+}
+
+/// The builtin training vehicle's twin: a small delay model of 60 s of its flight, the
+/// white-box of that flight (the true cable length) and the twin carrying it.
+pub(crate) fn builtin_twin() -> (LinearModel, LinearModel, TwinPlant) {
+    let sc = Scenario::builtin("training").unwrap();
+    let tpl = template(&sc);
+    let (x, u) = flight(&sc, 60.0);
+    let traj = Trajectory::new(&x, 2, &u, 1).unwrap();
+    let settings = IdentifySettings {
+        cable_length: Some(sc.payload.length),
+        vehicle_mass: sc.vehicle.mass,
+        ..IdentifySettings::default()
+    };
+    let plant =
+        whitebox_model(&traj, &tpl.states, &tpl.inputs, &settings, sc.payload.mass).unwrap();
+    let twin = TwinPlant::new(&sc, &plant, 2.0, 1).unwrap();
+    (tpl, plant, twin)
 }

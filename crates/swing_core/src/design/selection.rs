@@ -822,10 +822,9 @@ pub struct CandidateFigures {
     /// The miss of the twin's step bounds on the slow vehicle, when the candidate settled
     /// on every flight before the payload's tolerance and a slow vehicle is set.
     pub slow: Option<f64>,
-    /// The swing the twin's gust leaves ([`TwinGust::swing_iae`]) [deg·s], flown for a
-    /// candidate within every bound when the swing is the IMU's estimate
-    /// (`SelectionSettings::pick_on_gust`); ∞ when that flight diverged.
-    pub gust: Option<f64>,
+    /// The twin's gust flight ([`TwinPlant::gust`]), flown for a candidate within every
+    /// bound when the swing is the IMU's estimate (`SelectionSettings::pick_on_gust`).
+    pub gust: Option<TwinGust>,
 }
 
 impl CandidateFigures {
@@ -860,8 +859,9 @@ impl CandidateFigures {
     /// the swing the gust leaves where it was flown (∞ without a twin: nothing shows it
     /// damps).
     pub fn swing_cost(&self) -> f64 {
-        self.twin
-            .map_or(f64::INFINITY, |f| f.swing_excess + self.gust.unwrap_or(0.0))
+        self.twin.map_or(f64::INFINITY, |f| {
+            f.swing_excess + self.gust.map_or(0.0, |g| g.swing_iae)
+        })
     }
 }
 
@@ -1282,7 +1282,7 @@ pub fn select_for_control(
         // ranked on the gust too.
         if let Some(tw) = twin.filter(|tw| settings.pick_on_gust && tw.estimates_swing()) {
             if verdict.passed() {
-                figures.gust = Some(tw.gust(fresh()?)?.swing_iae);
+                figures.gust = Some(tw.gust(fresh()?)?);
             }
         }
         Ok((figures, verdict))
@@ -1524,6 +1524,11 @@ pub fn select_for_control(
             m
         }
     };
+    // The figures and verdict of `model` as it stands, which the designs below start from.
+    let mut judged = (
+        checked[pick_index].figures,
+        checked[pick_index].verdict.clone(),
+    );
     // The disturbance estimate's rate designed on the twin's gust, for a pick that passed.
     let disturbance_design = match twin {
         Some(tw)
@@ -1531,18 +1536,17 @@ pub fn select_for_control(
                 && (settings.disturbance_factors.iter().any(|&f| f > 1.0)
                     || settings.gust_noise > 0.0) =>
         {
-            let (designed, report) = design_disturbance(
-                model,
+            let (designed, designed_judged, report) = design_disturbance(
+                (model, judged),
                 mpc_settings,
                 &settings.disturbance_factors,
                 settings.gust_noise,
                 tw,
                 settings,
-                |m: &LinearModel, mpc: MpcController| {
-                    evaluate(m, mpc, false).map(|(_, verdict)| verdict)
-                },
+                |m: &LinearModel, mpc: MpcController| evaluate(m, mpc, false),
             )?;
             model = designed;
+            judged = designed_judged;
             Some(report)
         }
         _ => None,
@@ -1556,7 +1560,7 @@ pub fn select_for_control(
                 && settings.trust_factors.iter().any(|&f| f > 1.0) =>
         {
             let (designed, report) = design_trust(
-                model,
+                (model, judged),
                 mpc_settings,
                 &settings.trust_factors,
                 tw,
@@ -1720,23 +1724,29 @@ fn least_admissible(costs: impl IntoIterator<Item = Option<f64>>) -> usize {
     chosen.0
 }
 
-/// The disturbance estimate of the passed pick `model` designed on the twin `twin`
-/// (`SelectionSettings::disturbance_factors`, `gust_noise`): the pick as flown and each
-/// other design (a raised rate, a gust state of stationary std `gust_noise` when positive,
-/// both) that passes every flight of the selection again (`judge`, whose verdict names what
-/// a refused design misses) fly the twin's gust, and the
-/// admissible one whose gust leaves the least swing is taken (the pick as flown on a tie
-/// or when none is admissible). Returns the model, carrying the design taken, and the
-/// report for `control_check.disturbance_design`.
+/// A model with the figures it flew and the verdict on them.
+type Judged = (LinearModel, (CandidateFigures, Verdict));
+
+/// The disturbance estimate of the passed pick designed on the twin `twin`
+/// (`SelectionSettings::disturbance_factors`, `gust_noise`): the pick as flown (`pick`, with
+/// the figures it flew) and each other design (a raised rate, a gust state of stationary
+/// std `gust_noise` when positive, both) that passes every flight of the selection again
+/// (`judge`, whose verdict names what a refused design misses) fly the twin's gust, where
+/// their figures have not flown it already, and the admissible one whose gust leaves the
+/// least swing is taken (the pick as flown on a tie or when none is admissible). Returns
+/// the model, carrying the design taken, its figures and verdict, and the report for
+/// `control_check.disturbance_design`.
 fn design_disturbance(
-    model: LinearModel,
+    pick: Judged,
     mpc_settings: &MpcSettings,
     factors: &[f64],
     gust_noise: f64,
     twin: &TwinPlant,
     settings: &SelectionSettings,
-    judge: impl Fn(&LinearModel, MpcController) -> Result<Verdict, ControlError> + Sync,
-) -> Result<(LinearModel, serde_json::Value), ControlError> {
+    judge: impl Fn(&LinearModel, MpcController) -> Result<(CandidateFigures, Verdict), ControlError>
+        + Sync,
+) -> Result<(LinearModel, (CandidateFigures, Verdict), serde_json::Value), ControlError> {
+    let (model, pick_judged) = pick;
     let base =
         crate::control::mpc::settings_for(&model, mpc_settings.clone())?.kf_disturbance_noise;
     let mut raised: Vec<f64> = factors.iter().copied().filter(|&f| f > 1.0).collect();
@@ -1760,35 +1770,39 @@ fn design_disturbance(
         }
     }
     // Each design's flights depend on nothing flown for another: one per core.
-    let trials = crate::parallel::map(
+    let (trials, mut judged): (Vec<_>, Vec<_>) = crate::parallel::map(
         designs.iter().collect::<Vec<_>>(),
-        |(factor, gust_noise, m)| -> Result<DisturbanceTrial, ControlError> {
+        |(factor, gust_noise, m)| -> Result<_, ControlError> {
             let mpc = MpcController::new(m, mpc_settings.clone())?;
             // The pick as flown passed already.
             let as_flown = *factor == 1.0 && gust_noise.is_none();
-            let refused = if as_flown {
-                Vec::new()
+            let (figures, verdict) = if as_flown {
+                pick_judged.clone()
             } else {
-                judge(m, mpc.fresh_copy()?)?.reasons()
+                judge(m, mpc.fresh_copy()?)?
             };
+            let refused = verdict.reasons();
             let passed = refused.is_empty();
-            let gust = if passed {
-                Some(twin.gust(Box::new(mpc))?)
-            } else {
-                None
+            let gust = match figures.gust {
+                Some(g) if passed => Some(g),
+                None if passed => Some(twin.gust(Box::new(mpc))?),
+                _ => None,
             };
-            Ok(DisturbanceTrial {
+            let trial = DisturbanceTrial {
                 factor: *factor,
                 noise: base * factor,
                 gust_noise: *gust_noise,
                 passed,
                 refused,
                 gust,
-            })
+            };
+            Ok((trial, (figures, verdict)))
         },
     )
     .into_iter()
-    .collect::<Result<Vec<_>, _>>()?;
+    .collect::<Result<Vec<_>, _>>()?
+    .into_iter()
+    .unzip();
     let chosen = choose_disturbance(&trials, settings);
     let report = json!({
         "gust": TWIN_GUST,
@@ -1809,7 +1823,7 @@ fn design_disturbance(
         }).collect::<Vec<_>>(),
     });
     let (_, _, model) = designs.swap_remove(chosen);
-    Ok((model, report))
+    Ok((model, judged.swap_remove(chosen), report))
 }
 
 /// A design's twin gust figures for its report: the swing IAE and the resettle time, each
@@ -1843,14 +1857,15 @@ impl TrustTrial {
     }
 }
 
-/// The swing estimate's trust of the passed pick `model` designed on the twin `twin`
-/// (`SelectionSettings::trust_factors`): the pick as designed and each raised swing
-/// measurement noise are judged on every flight of the selection (`judge`) and flown on
-/// the twin's gust, and the admissible one of least twin swing (the step's excess plus the
-/// gust's IAE) is taken, the pick as designed on a tie or when none is admissible. Returns
-/// the model, carrying the noise taken, and the report for `control_check.trust_design`.
+/// The swing estimate's trust of the passed pick designed on the twin `twin`
+/// (`SelectionSettings::trust_factors`): the pick as designed (`pick`, with the figures it
+/// flew) and each raised swing measurement noise, judged on every flight of the selection
+/// (`judge`), are flown on the twin's gust where their figures have not flown it already,
+/// and the admissible one of least twin swing (the step's excess plus the gust's IAE) is
+/// taken, the pick as designed on a tie or when none is admissible. Returns the model,
+/// carrying the noise taken, and the report for `control_check.trust_design`.
 fn design_trust(
-    model: LinearModel,
+    pick: Judged,
     mpc_settings: &MpcSettings,
     factors: &[f64],
     twin: &TwinPlant,
@@ -1858,6 +1873,7 @@ fn design_trust(
     judge: impl Fn(&LinearModel, MpcController) -> Result<(CandidateFigures, Verdict), ControlError>
         + Sync,
 ) -> Result<(LinearModel, serde_json::Value), ControlError> {
+    let (model, pick_judged) = pick;
     let base =
         crate::control::mpc::settings_for(&model, mpc_settings.clone())?.swing_measurement_noise();
     let mut designs = vec![(1.0, model.clone())];
@@ -1868,18 +1884,21 @@ fn design_trust(
             designs.push((f, m));
         }
     }
-    // Each design's flights depend on nothing flown for another: one per core. The pick
-    // as designed is judged again: the disturbance design may have changed it.
+    // Each design's flights depend on nothing flown for another: one per core.
     let trials = crate::parallel::map(
         designs.iter().collect::<Vec<_>>(),
         |(factor, m)| -> Result<TrustTrial, ControlError> {
             let mpc = MpcController::new(m, mpc_settings.clone())?;
-            let (figures, verdict) = judge(m, mpc.fresh_copy()?)?;
-            let passed = verdict.passed();
-            let gust = if passed {
-                Some(twin.gust(Box::new(mpc))?)
+            let (figures, verdict) = if *factor == 1.0 {
+                pick_judged.clone()
             } else {
-                None
+                judge(m, mpc.fresh_copy()?)?
+            };
+            let passed = verdict.passed();
+            let gust = match figures.gust {
+                Some(g) if passed => Some(g),
+                None if passed => Some(twin.gust(Box::new(mpc))?),
+                _ => None,
             };
             Ok(TrustTrial {
                 factor: *factor,
@@ -2050,7 +2069,7 @@ fn checked_json(c: &CheckedCandidate) -> serde_json::Value {
         "hold": f.hold.map(|h| json!({"wander": h.wander, "late_error": h.late_error})),
         "payload_miss": f.payload,
         "slow_vehicle_miss": f.slow,
-        "gust_swing_iae": f.gust.filter(|g| g.is_finite()),
+        "gust_swing_iae": f.gust.map(|g| g.swing_iae).filter(|g| g.is_finite()),
         "swing_cost": Some(f.swing_cost()).filter(|c| c.is_finite()),
     })
 }
@@ -2490,7 +2509,10 @@ mod tests {
         let s = SelectionSettings::default();
         let gusty = |step: f64, gust: Option<f64>| {
             checked(CandidateFigures {
-                gust,
+                gust: gust.map(|swing_iae| TwinGust {
+                    swing_iae,
+                    resettle: 1.0,
+                }),
                 ..with_twin(|f| f.swing_excess = step)
             })
         };
@@ -2882,6 +2904,61 @@ mod tests {
         // The first not admissible: any admissible one after it flies, the least of them.
         assert_eq!(least_admissible([None, Some(5.0), Some(4.0)]), 2);
         assert_eq!(least_admissible([Some(f64::NAN), None]), 0);
+    }
+
+    /// A design whose figures flew the twin's gust already (the IMU's ranking) is not
+    /// flown on it again: its figures are taken as they stand, and those of the design
+    /// taken go on to the next design; one whose figures did not fly it is flown.
+    #[test]
+    fn a_design_whose_figures_flew_the_gust_is_not_flown_again() {
+        use crate::design::fixtures::builtin_twin;
+        let (tpl, _, twin) = builtin_twin();
+        let s = SelectionSettings::default();
+        // Gust figures no flight of the twin gives: the report shows where they came from.
+        let with_gust = |swing_iae: f64| CandidateFigures {
+            gust: Some(TwinGust {
+                swing_iae,
+                resettle: 0.5,
+            }),
+            ..good()
+        };
+        let pick = (tpl.clone(), (with_gust(123.0), Verdict::default()));
+        let judge = |_: &LinearModel, _: MpcController| Ok((with_gust(7.0), Verdict::default()));
+        let (_, judged, report) = design_disturbance(
+            pick,
+            &MpcSettings::default(),
+            &[1.0, 2.5],
+            0.0,
+            &twin,
+            &s,
+            judge,
+        )
+        .unwrap();
+        let swing = |r: &serde_json::Value, i: usize| r["tried"][i]["gust_swing_iae"].as_f64();
+        assert_eq!(
+            (swing(&report, 0), swing(&report, 1)),
+            (Some(123.0), Some(7.0))
+        );
+        assert_eq!(report["factor"], 2.5);
+        assert_eq!(judged.0.gust.map(|g| g.swing_iae), Some(7.0));
+        let (_, report) = design_trust(
+            (tpl.clone(), judged),
+            &MpcSettings::default(),
+            &[1.0],
+            &twin,
+            &s,
+            judge,
+        )
+        .unwrap();
+        assert_eq!(swing(&report, 0), Some(7.0));
+        // Figures without the gust: flown, and a real flight leaves neither sentinel.
+        let pick = (tpl, (good(), Verdict::default()));
+        let judge = |_: &LinearModel, _: MpcController| Ok((good(), Verdict::default()));
+        let (_, _, report) =
+            design_disturbance(pick, &MpcSettings::default(), &[1.0], 0.0, &twin, &s, judge)
+                .unwrap();
+        let flown = swing(&report, 0).unwrap();
+        assert!(flown > 0.0 && flown != 123.0 && flown != 7.0, "{report}");
     }
 
     /// A trust is judged by its twin swing (the step's excess plus the gust's IAE) only

@@ -684,28 +684,7 @@ fn sim_error(e: SimError) -> ControlError {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::design::fixtures::{flight, template};
-    use crate::sysid::hankel::Trajectory;
-    use crate::sysid::pipeline::whitebox_model;
-    use crate::sysid::settings::IdentifySettings;
-
-    /// The builtin training vehicle's twin: a small delay model of 60 s of its flight, the
-    /// white-box of that flight (the true cable length) and the twin carrying it.
-    fn builtin_twin() -> (LinearModel, LinearModel, TwinPlant) {
-        let sc = Scenario::builtin("training").unwrap();
-        let tpl = template(&sc);
-        let (x, u) = flight(&sc, 60.0);
-        let traj = Trajectory::new(&x, 2, &u, 1).unwrap();
-        let settings = IdentifySettings {
-            cable_length: Some(sc.payload.length),
-            vehicle_mass: sc.vehicle.mass,
-            ..IdentifySettings::default()
-        };
-        let plant =
-            whitebox_model(&traj, &tpl.states, &tpl.inputs, &settings, sc.payload.mass).unwrap();
-        let twin = TwinPlant::new(&sc, &plant, 2.0, 1).unwrap();
-        (tpl, plant, twin)
-    }
+    use crate::design::fixtures::{builtin_twin, template};
 
     #[test]
     fn the_twin_measures_how_much_of_px4_s_swing_the_mpc_removes() {
