@@ -1773,21 +1773,18 @@ fn design_disturbance(
     let (trials, mut judged): (Vec<_>, Vec<_>) = crate::parallel::map(
         designs.iter().collect::<Vec<_>>(),
         |(factor, gust_noise, m)| -> Result<_, ControlError> {
-            let mpc = MpcController::new(m, mpc_settings.clone())?;
+            let build = || MpcController::new(m, mpc_settings.clone());
             // The pick as flown passed already.
             let as_flown = *factor == 1.0 && gust_noise.is_none();
-            let (figures, verdict) = if as_flown {
-                pick_judged.clone()
+            let ((figures, verdict), mpc) = if as_flown {
+                (pick_judged.clone(), None)
             } else {
-                judge(m, mpc.fresh_copy()?)?
+                let mpc = build()?;
+                (judge(m, mpc.fresh_copy()?)?, Some(mpc))
             };
             let refused = verdict.reasons();
             let passed = refused.is_empty();
-            let gust = match figures.gust {
-                Some(g) if passed => Some(g),
-                None if passed => Some(twin.gust(Box::new(mpc))?),
-                _ => None,
-            };
+            let gust = passed_gust(&figures, passed, twin, || mpc.map_or_else(build, Ok))?;
             let trial = DisturbanceTrial {
                 factor: *factor,
                 noise: base * factor,
@@ -1824,6 +1821,22 @@ fn design_disturbance(
     });
     let (_, _, model) = designs.swap_remove(chosen);
     Ok((model, judged.swap_remove(chosen), report))
+}
+
+/// The twin gust a design leaves when it `passed`: the one its figures flew already, else
+/// flown now on its controller (`mpc`, built only then); none for a refused design, which
+/// may not fly.
+fn passed_gust(
+    figures: &CandidateFigures,
+    passed: bool,
+    twin: &TwinPlant,
+    mpc: impl FnOnce() -> Result<MpcController, ControlError>,
+) -> Result<Option<TwinGust>, ControlError> {
+    match figures.gust {
+        _ if !passed => Ok(None),
+        Some(g) => Ok(Some(g)),
+        None => Ok(Some(twin.gust(Box::new(mpc()?))?)),
+    }
 }
 
 /// A design's twin gust figures for its report: the swing IAE and the resettle time, each
@@ -1888,18 +1901,15 @@ fn design_trust(
     let trials = crate::parallel::map(
         designs.iter().collect::<Vec<_>>(),
         |(factor, m)| -> Result<TrustTrial, ControlError> {
-            let mpc = MpcController::new(m, mpc_settings.clone())?;
-            let (figures, verdict) = if *factor == 1.0 {
-                pick_judged.clone()
+            let build = || MpcController::new(m, mpc_settings.clone());
+            let ((figures, verdict), mpc) = if *factor == 1.0 {
+                (pick_judged.clone(), None)
             } else {
-                judge(m, mpc.fresh_copy()?)?
+                let mpc = build()?;
+                (judge(m, mpc.fresh_copy()?)?, Some(mpc))
             };
             let passed = verdict.passed();
-            let gust = match figures.gust {
-                Some(g) if passed => Some(g),
-                None if passed => Some(twin.gust(Box::new(mpc))?),
-                _ => None,
-            };
+            let gust = passed_gust(&figures, passed, twin, || mpc.map_or_else(build, Ok))?;
             Ok(TrustTrial {
                 factor: *factor,
                 noise: base * factor,
