@@ -137,6 +137,27 @@ def test_cli_bad_spec_one_line_exit_2_before_flying(cli, tmp_path):
 # --- sampling ------------------------------------------------------------------------------
 
 
+def test_the_sensor_study_flies_the_imu_studys_samples_with_the_swing_sensor():
+    """`robustness-imu-vehicle-sensor.toml` is compared with `robustness-imu-vehicle.toml`
+    sample for sample (README): the same seed, base and draws, but for the swing source and
+    the sensor's noise, whose draw must not move any other."""
+    root = Path(__file__).resolve().parents[1] / "examples/campaigns"
+    imu = load_spec(root / "robustness-imu-vehicle.toml")
+    sensor = load_spec(root / "robustness-imu-vehicle-sensor.toml")
+    assert (imu.seed, imu.samples, imu.controllers) == (
+        sensor.seed,
+        sensor.samples,
+        sensor.controllers,
+    )
+    assert imu.base["common"] == {"sensors": {"swing": "imu"}}
+    assert {k: v for k, v in imu.base.items() if k != "common"} == sensor.base
+    assert set(sensor.vary) - set(imu.vary) == {"noise.swing_std"}
+    for i in (0, 13, 126, imu.samples - 1):
+        drawn = sensor.draw(i)
+        assert 0.0005 <= drawn.pop("noise.swing_std") <= 0.01
+        assert drawn == imu.draw(i)
+
+
 def test_draws_depend_on_seed_and_index_alone(tmp_path):
     spec = load_spec(write_study(tmp_path / "s.toml", samples=50))
     other = load_spec(write_study(tmp_path / "t.toml", samples=7))
